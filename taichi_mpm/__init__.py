@@ -1,0 +1,48 @@
+"""taichi_mpm: a standalone differentiable 3D MLS-MPM simulator in Taichi.
+
+Imports taichi and numpy only. Call :func:`init` once, build a :class:`Scene` and a
+:class:`Material`, then run a :class:`Simulator` forward and, for gradients, backward.
+"""
+
+from taichi_mpm.materials import (
+    PARAMETER_NAMES,
+    DruckerPrager,
+    FixedCorotated,
+    LinearElastic,
+    Material,
+    MaterialError,
+    NeoHookean,
+    NoPlasticity,
+    PlasticMixture,
+    StVKHencky,
+    VonMises,
+    WeaklyCompressibleFluid,
+)
+from taichi_mpm.runtime import init
+from taichi_mpm.scene import Scene, SceneError, Walls, cube, paper_scene, rigid_velocity, sphere
+from taichi_mpm.simulator import Gradients, Simulator
+
+__all__ = [
+    "PARAMETER_NAMES",
+    "DruckerPrager",
+    "FixedCorotated",
+    "Gradients",
+    "LinearElastic",
+    "Material",
+    "MaterialError",
+    "NeoHookean",
+    "NoPlasticity",
+    "PlasticMixture",
+    "Scene",
+    "SceneError",
+    "Simulator",
+    "StVKHencky",
+    "VonMises",
+    "Walls",
+    "WeaklyCompressibleFluid",
+    "cube",
+    "init",
+    "paper_scene",
+    "rigid_velocity",
+    "sphere",
+]

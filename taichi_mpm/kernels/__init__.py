@@ -1,0 +1,1 @@
+"""Taichi kernels of the simulator, one per MPM phase."""

@@ -1,0 +1,144 @@
+"""MLS-MPM transfer kernels: particle-to-grid, grid update, grid-to-particle.
+
+APIC transfer with quadratic B-splines (Hu et al. 2018). Arrays are time-indexed,
+``x[slot, p]``, so no value is overwritten inside a recorded segment and Taichi's
+autodiff needs no bookkeeping. The 27-node stencil is unrolled with ``ti.static``:
+dynamic stencil loops gave wrong gradients in Taichi 1.7.
+"""
+
+import taichi as ti
+
+from taichi_mpm.kernels.linalg import identity, matmul, matvec, outer
+
+MASS_FLOOR = 1e-12  # grid velocity = momentum / max(mass, floor): no NaN gradients
+SLIP, STICKY, SEPARATE = 0, 1, 2
+TANGENT_TINY = 1e-20
+
+
+@ti.func
+def stencil(xp, inv_dx, n):
+    """Lower-corner node and quadratic B-spline weights of a particle."""
+    Xp = xp * inv_dx
+    base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
+    base = ti.max(ti.min(base, n - 3), 0)
+    fx = Xp - ti.cast(base, float)
+    w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
+    return base, fx, w
+
+
+@ti.kernel
+def p2g(
+    x: ti.types.ndarray(),
+    v: ti.types.ndarray(),
+    C: ti.types.ndarray(),
+    stress: ti.types.ndarray(),
+    slot: ti.i32,
+    grid_mass: ti.types.ndarray(),
+    grid_momentum: ti.types.ndarray(),
+    dx: float,
+    dt: float,
+    particle_volume: float,
+    particle_mass: float,
+    serial: ti.template(),
+):
+    """Scatter mass, momentum and the stress impulse of every particle to the grid."""
+    ti.loop_config(serialize=serial)
+    for p in range(x.shape[1]):
+        n = grid_mass.shape[1]
+        inv_dx = 1.0 / dx
+        base, fx, w = stencil(x[slot, p], inv_dx, n)
+        impulse = (-dt * particle_volume * 4.0 * inv_dx * inv_dx) * stress[slot, p]
+        affine = impulse + particle_mass * C[slot, p]
+        momentum = particle_mass * v[slot, p]
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            offset = ti.Vector([i, j, k])
+            dpos = (ti.cast(offset, float) - fx) * dx
+            weight = w[i][0] * w[j][1] * w[k][2]
+            node = base + offset
+            grid_momentum[slot, node[0], node[1], node[2]] += weight * (
+                momentum + matvec(affine, dpos)
+            )
+            grid_mass[slot, node[0], node[1], node[2]] += weight * particle_mass
+
+
+@ti.func
+def apply_walls(v, node, n, kind, thickness, friction):
+    """Box walls ``thickness`` cells deep on every face."""
+    for d in ti.static(range(3)):
+        near_low = node[d] < thickness
+        near_high = node[d] >= n - thickness
+        if kind == STICKY:
+            if near_low or near_high:
+                v = ti.Vector.zero(float, 3)
+        else:
+            into_wall = (near_low and v[d] < 0) or (near_high and v[d] > 0)
+            if into_wall:
+                normal_speed = ti.abs(v[d])
+                tangent = v
+                tangent[d] = 0.0
+                if kind == SEPARATE:
+                    speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
+                    tangent *= ti.max(0.0, 1.0 - friction * normal_speed / speed)
+                v = tangent
+    return v
+
+
+@ti.kernel
+def grid_update(
+    grid_mass: ti.types.ndarray(),
+    grid_momentum: ti.types.ndarray(),
+    slot: ti.i32,
+    grid_velocity: ti.types.ndarray(),
+    dt: float,
+    gx: float,
+    gy: float,
+    gz: float,
+    wall_kind: ti.i32,
+    wall_thickness: ti.i32,
+    wall_friction: float,
+    serial: ti.template(),
+):
+    """Grid velocity from momentum, plus gravity and the box walls."""
+    ti.loop_config(serialize=serial)
+    for i, j, k in ti.ndrange(grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]):
+        n = grid_mass.shape[1]
+        gravity = ti.Vector([gx, gy, gz])
+        mass = grid_mass[slot, i, j, k]
+        v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
+        v = apply_walls(v, ti.Vector([i, j, k]), n, wall_kind, wall_thickness, wall_friction)
+        grid_velocity[slot, i, j, k] = v
+
+
+@ti.kernel
+def g2p(
+    x: ti.types.ndarray(),
+    v: ti.types.ndarray(),
+    C: ti.types.ndarray(),
+    F: ti.types.ndarray(),
+    F_corrected: ti.types.ndarray(),
+    grid_velocity: ti.types.ndarray(),
+    slot: ti.i32,
+    dx: float,
+    dt: float,
+    serial: ti.template(),
+):
+    """Gather velocity and affine velocity; advect; state of step slot + 1."""
+    ti.loop_config(serialize=serial)
+    for p in range(x.shape[1]):
+        n = grid_velocity.shape[1]
+        inv_dx = 1.0 / dx
+        base, fx, w = stencil(x[slot, p], inv_dx, n)
+        new_v = ti.Vector.zero(float, 3)
+        new_C = ti.Matrix.zero(float, 3, 3)
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            offset = ti.Vector([i, j, k])
+            dpos = ti.cast(offset, float) - fx
+            weight = w[i][0] * w[j][1] * w[k][2]
+            node = base + offset
+            g_v = grid_velocity[slot, node[0], node[1], node[2]]
+            new_v = new_v + weight * g_v
+            new_C = new_C + (4.0 * inv_dx * weight) * outer(g_v, dpos)
+        v[slot + 1, p] = new_v
+        C[slot + 1, p] = new_C
+        x[slot + 1, p] = x[slot, p] + dt * new_v
+        F[slot + 1, p] = matmul(identity() + dt * new_C, F_corrected[slot, p])

@@ -1,0 +1,438 @@
+"""The differentiable simulator: forward stepping, checkpoints and reverse-mode gradients.
+
+Usage (a tape in three verbs)::
+
+    sim = Simulator(scene, material)
+    positions = sim.forward(frames)          # record: (len(frames), N, 3)
+    grads = sim.backward(dloss_dpositions)   # same shape as positions
+    grads.material["E"], grads.positions, grads.velocities
+
+Memory does not grow with steps x particles: the forward pass keeps only the state at
+the start of every segment of ``checkpoint_every`` steps; the backward pass re-runs one
+segment at a time, storing its steps, and walks it backwards with Taichi's autodiff.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from taichi_mpm import runtime
+from taichi_mpm.kernels import constitutive, slots, transfer
+from taichi_mpm.materials import (
+    PARAMETER_INDEX,
+    DruckerPrager,
+    FixedCorotated,
+    LinearElastic,
+    Material,
+    PlasticMixture,
+    StVKHencky,
+    VonMises,
+    WeaklyCompressibleFluid,
+)
+from taichi_mpm.scene import WALL_KINDS, Scene
+
+_WALL_CODES = {"slip": transfer.SLIP, "sticky": transfer.STICKY, "separate": transfer.SEPARATE}
+assert set(_WALL_CODES) == set(WALL_KINDS)
+
+#: Default memory for one recorded segment; sets ``checkpoint_every`` when not given.
+SEGMENT_BUDGET_BYTES = 32 * 2**20
+#: Scenes with at least this many particles use parallel loops (launch overhead dominates below).
+PARALLEL_THRESHOLD = 20_000
+
+
+@dataclass
+class Gradients:
+    """Gradient of the loss seeded in :meth:`Simulator.backward`."""
+
+    material: dict[str, float]
+    positions: np.ndarray  # dL/dx at step 0, (N, 3)
+    velocities: np.ndarray  # dL/dv at step 0, (N, 3)
+
+
+class Simulator:
+    """Differentiable 3D MLS-MPM simulation of one scene and one material.
+
+    Parameters
+    ----------
+    scene : Scene
+        Particles, grid, time step, walls.
+    material : Material
+        Constitutive law; change it between runs with :attr:`material`.
+    checkpoint_every : int, optional
+        Steps per recorded segment. Default: as many as fit in 32 MiB.
+        ``checkpoint_every=scene.steps`` stores the whole trajectory (no recompute).
+    parallel : bool, optional
+        Parallel particle loops; default on from 20k particles.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        material: Material,
+        checkpoint_every: int | None = None,
+        parallel: bool | None = None,
+    ) -> None:
+        info = runtime.current()
+        self.scene = scene
+        self._dtype = info.dtype
+        self._tol = info.spectral_tol
+        self._serial = not (
+            parallel if parallel is not None else scene.num_particles >= PARALLEL_THRESHOLD
+        )
+        self.segment = self._segment_length(checkpoint_every)
+        self.num_segments = -(-scene.steps // self.segment)
+        self._allocate()
+        self.material = material
+        self._frames: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ set-up
+
+    def _segment_length(self, requested: int | None) -> int:
+        steps = self.scene.steps
+        if requested is not None:
+            if not requested >= 1:
+                raise ValueError(f"checkpoint_every={requested} must be >= 1")
+            return min(requested, steps)
+        per_step = self.bytes_per_step()
+        return int(np.clip(SEGMENT_BUDGET_BYTES // per_step, 1, steps))
+
+    def bytes_per_step(self) -> int:
+        """Memory one recorded step takes (values, gradients and SVD factors)."""
+        size = 8 if self._dtype == ti.f64 else 4
+        particle = (3 + 3 + 9 + 9 + 9 + 9) * 2 + 9 * 4 + 6 * 3
+        grid = (1 + 3 + 3) * 2
+        return size * (particle * self.scene.num_particles + grid * self.scene.grid_resolution**3)
+
+    def _allocate(self) -> None:
+        n, N, k = self.scene.grid_resolution, self.scene.num_particles, self.segment
+        vec, mat, dt = (
+            ti.types.vector(3, self._dtype),
+            ti.types.matrix(3, 3, self._dtype),
+            self._dtype,
+        )
+
+        def array(element, shape, grad=True):
+            return ti.ndarray(element, shape=shape, needs_grad=grad)
+
+        self.x = array(vec, (k + 1, N))
+        self.v = array(vec, (k + 1, N))
+        self.C = array(mat, (k + 1, N))
+        self.F = array(mat, (k + 1, N))
+        self.F_corrected = array(mat, (k, N))
+        self.stress = array(mat, (k, N))
+        self.grid_mass = array(dt, (k, n, n, n))
+        self.grid_momentum = array(vec, (k, n, n, n))
+        self.grid_velocity = array(vec, (k, n, n, n))
+        self.params = array(dt, (len(PARAMETER_INDEX),))
+        self._state = (self.x, self.v, self.C, self.F)
+        self._checkpoints = (
+            array(vec, (self.num_segments, N), False),
+            array(vec, (self.num_segments, N), False),
+            array(mat, (self.num_segments, N), False),
+            array(mat, (self.num_segments, N), False),
+        )
+        self._carry = (
+            array(vec, (1, N), False),
+            array(vec, (1, N), False),
+            array(mat, (1, N), False),
+            array(mat, (1, N), False),
+        )
+        self._seed = array(vec, (N,), False)
+        coeff = ti.types.matrix(3, 2, self._dtype)
+        self._trial_basis = (array(mat, (k, N), False), array(mat, (k, N), False))
+        self._elastic_basis = (array(mat, (k, N), False), array(mat, (k, N), False))
+        self._coefficients = {
+            name: array(coeff, (k, N), False) for name in ("von_mises", "sand", "elastic")
+        }
+
+    @property
+    def material(self) -> Material:
+        return self._material
+
+    @material.setter
+    def material(self, material: Material) -> None:
+        if not isinstance(material, Material):
+            raise TypeError(
+                f"material must be a taichi_mpm.Material, got {type(material).__name__}"
+            )
+        self._material = material
+        self._phases = self._constitutive_phases(material)
+        self.params.from_numpy(material.parameter_array().astype(self._numpy_dtype))
+
+    def _constitutive_phases(self, material: Material) -> list[tuple[object, Callable, bool]]:
+        """(kernel, args(slot), differentiated) for the plastic then the elastic law."""
+        serial, tol = self._serial, self._tol
+        F, Fc, params = self.F, self.F_corrected, self.params
+        phases: list[tuple[object, Callable, bool]] = []
+
+        def spectral(kernel, source, basis, law_code, coeff_name, target):
+            coeff = self._coefficients[coeff_name]
+            phases.append(
+                (
+                    constitutive.decompose,
+                    lambda s: (source, s, params, law_code, *basis, coeff, tol, serial),
+                    False,
+                )
+            )
+            phases.append(
+                (kernel, lambda s: (source, s, *basis, coeff, params, target, serial), True)
+            )
+
+        plastic = material.plastic
+        components = (
+            plastic.components if isinstance(plastic, PlasticMixture) else ((1.0, plastic),)
+        )
+        for _, law in components:
+            if isinstance(law, VonMises):
+                spectral(
+                    constitutive.plastic_von_mises,
+                    F,
+                    self._trial_basis,
+                    constitutive.LAW_VON_MISES,
+                    "von_mises",
+                    Fc,
+                )
+            elif isinstance(law, DruckerPrager):
+                spectral(
+                    constitutive.plastic_sand,
+                    F,
+                    self._trial_basis,
+                    constitutive.LAW_SAND,
+                    "sand",
+                    Fc,
+                )
+            else:
+                kernel = (
+                    constitutive.plastic_fluid
+                    if isinstance(law, WeaklyCompressibleFluid)
+                    else constitutive.plastic_identity
+                )
+                phases.append((kernel, lambda s, k=kernel: (F, s, params, Fc, serial), True))
+        elastic = material.elastic
+        if isinstance(elastic, FixedCorotated | StVKHencky):
+            kernel, code = (
+                (constitutive.stress_corotated, constitutive.LAW_UNIT)
+                if isinstance(elastic, FixedCorotated)
+                else (constitutive.stress_stvk_hencky, constitutive.LAW_HENCKY)
+            )
+            spectral(kernel, Fc, self._elastic_basis, code, "elastic", self.stress)
+        else:
+            kernel = (
+                constitutive.stress_linear
+                if isinstance(elastic, LinearElastic)
+                else constitutive.stress_neo_hookean
+            )
+            phases.append((kernel, lambda s: (Fc, s, params, self.stress, serial), True))
+        return phases
+
+    @property
+    def _numpy_dtype(self):
+        return np.float64 if self._dtype == ti.f64 else np.float32
+
+    # ------------------------------------------------------------------ one step
+
+    def _substep(self, s: int) -> None:
+        """Advance slot s to slot s + 1 (all phases of one MPM step)."""
+        for kernel, args, _ in self._phases:
+            kernel(*args(s))
+        transfer.p2g(*self._p2g_args(s))
+        transfer.grid_update(*self._grid_args(s))
+        transfer.g2p(*self._g2p_args(s))
+
+    def _substep_grad(self, s: int) -> None:
+        """Reverse of :meth:`_substep` (SVD factors and coefficients are constants)."""
+        transfer.g2p.grad(*self._g2p_args(s))
+        transfer.grid_update.grad(*self._grid_args(s))
+        transfer.p2g.grad(*self._p2g_args(s))
+        for kernel, args, differentiated in reversed(self._phases):
+            if differentiated:
+                kernel.grad(*args(s))
+
+    def _p2g_args(self, s: int):
+        sc = self.scene
+        return (
+            self.x,
+            self.v,
+            self.C,
+            self.stress,
+            s,
+            self.grid_mass,
+            self.grid_momentum,
+            sc.dx,
+            sc.dt,
+            sc.particle_volume,
+            sc.particle_mass,
+            self._serial,
+        )
+
+    def _grid_args(self, s: int):
+        sc, walls = self.scene, self.scene.walls
+        return (
+            self.grid_mass,
+            self.grid_momentum,
+            s,
+            self.grid_velocity,
+            sc.dt,
+            *sc.gravity,
+            _WALL_CODES[walls.kind],
+            walls.thickness,
+            walls.friction,
+            self._serial,
+        )
+
+    def _g2p_args(self, s: int):
+        sc = self.scene
+        return (
+            self.x,
+            self.v,
+            self.C,
+            self.F,
+            self.F_corrected,
+            self.grid_velocity,
+            s,
+            sc.dx,
+            sc.dt,
+            self._serial,
+        )
+
+    # ------------------------------------------------------------------ segments
+
+    def _segment_steps(self, segment: int) -> int:
+        return min(self.segment, self.scene.steps - segment * self.segment)
+
+    def _load_initial_state(self) -> None:
+        sc, N, np_dtype = self.scene, self.scene.num_particles, self._numpy_dtype
+        eye = np.broadcast_to(np.eye(3), (N, 3, 3))
+        for array, value in zip(
+            self._carry, (sc.positions, sc.velocities, np.zeros((N, 3, 3)), eye), strict=True
+        ):
+            array.from_numpy(np.ascontiguousarray(value, dtype=np_dtype)[None])
+        for array, carry in zip(self._state, self._carry, strict=True):
+            slots.copy_slot(carry, 0, array, 0)
+
+    def _run_segment(self, steps: int) -> None:
+        self.grid_mass.fill(0)
+        self.grid_momentum.fill(0)
+        self.F_corrected.fill(0)
+        for s in range(steps):
+            self._substep(s)
+
+    def _store_checkpoint(self, segment: int) -> None:
+        for array, store in zip(self._state, self._checkpoints, strict=True):
+            slots.copy_slot(array, 0, store, segment)
+
+    def _restore_checkpoint(self, segment: int) -> None:
+        for array, store in zip(self._state, self._checkpoints, strict=True):
+            slots.copy_slot(store, segment, array, 0)
+
+    def _shift_last_to_first(self, steps: int) -> None:
+        for array in self._state:
+            slots.copy_slot(array, steps, array, 0)
+
+    # ------------------------------------------------------------------ public API
+
+    def forward(self, frames: Iterable[int] | None = None) -> np.ndarray:
+        """Run all steps from the scene's initial state.
+
+        Parameters
+        ----------
+        frames : iterable of int, optional
+            Steps (0..scene.steps) whose particle positions are returned; default every step.
+
+        Returns
+        -------
+        (len(frames), N, 3) float64 array of positions.
+        """
+        frames = self._check_frames(frames)
+        self._load_initial_state()
+        positions = np.empty((len(frames), self.scene.num_particles, 3))
+        for segment in range(self.num_segments):
+            start, steps = segment * self.segment, self._segment_steps(segment)
+            self._store_checkpoint(segment)
+            self._run_segment(steps)
+            wanted = np.nonzero((frames >= start) & (frames <= start + steps))[0]
+            if len(wanted):
+                recorded = self.x.to_numpy()
+                positions[wanted] = recorded[frames[wanted] - start]
+            self._shift_last_to_first(steps)
+        self._frames = frames
+        return positions
+
+    def final_state(self) -> dict[str, np.ndarray]:
+        """x, v, C, F after the last :meth:`forward` call."""
+        return {
+            name: array.to_numpy()[0]
+            for name, array in zip(("x", "v", "C", "F"), self._state, strict=True)
+        }
+
+    def backward(self, position_grads: np.ndarray) -> Gradients:
+        """Reverse pass for a loss on the positions returned by the last :meth:`forward`.
+
+        Parameters
+        ----------
+        position_grads : (len(frames), N, 3) array
+            dL/dpositions, the gradient of a scalar loss with respect to the recorded frames.
+        """
+        if self._frames is None:
+            raise RuntimeError("call forward(frames) before backward(...)")
+        frames = self._frames
+        expected = (len(frames), self.scene.num_particles, 3)
+        position_grads = np.asarray(position_grads, dtype=np.float64)
+        if position_grads.shape != expected:
+            raise ValueError(
+                f"position_grads must have the shape of the recorded positions {expected}, "
+                f"got {position_grads.shape}"
+            )
+        self.params.grad.fill(0)
+        for segment in reversed(range(self.num_segments)):
+            start, steps = segment * self.segment, self._segment_steps(segment)
+            self._restore_checkpoint(segment)
+            self._run_segment(steps)
+            self._zero_grads()
+            if segment < self.num_segments - 1:
+                for array, carry in zip(self._state, self._carry, strict=True):
+                    slots.copy_slot(carry, 0, array.grad, steps)
+            low = start if segment == 0 else start + 1
+            for index in np.nonzero((frames >= low) & (frames <= start + steps))[0]:
+                self._seed.from_numpy(position_grads[index].astype(self._numpy_dtype))
+                slots.add_to_slot(self.x.grad, int(frames[index] - start), self._seed)
+            for s in reversed(range(steps)):
+                self._substep_grad(s)
+            for array, carry in zip(self._state, self._carry, strict=True):
+                slots.copy_slot(array.grad, 0, carry, 0)
+        return self._collect_gradients()
+
+    def _zero_grads(self) -> None:
+        for array in (
+            *self._state,
+            self.F_corrected,
+            self.stress,
+            self.grid_mass,
+            self.grid_momentum,
+            self.grid_velocity,
+        ):
+            array.grad.fill(0)
+
+    def _collect_gradients(self) -> Gradients:
+        param_grad = self.params.grad.to_numpy()
+        names = self._material.parameters()
+        return Gradients(
+            material={name: float(param_grad[PARAMETER_INDEX[name]]) for name in names},
+            positions=self._carry[0].to_numpy()[0].astype(np.float64),
+            velocities=self._carry[1].to_numpy()[0].astype(np.float64),
+        )
+
+    def _check_frames(self, frames: Iterable[int] | None) -> np.ndarray:
+        steps = self.scene.steps
+        if frames is None:
+            return np.arange(steps + 1)
+        frames = np.asarray(list(frames), dtype=np.int64)
+        if frames.ndim != 1 or len(frames) == 0:
+            raise ValueError("frames must be a non-empty sequence of step indices")
+        if frames.min() < 0 or frames.max() > steps:
+            raise ValueError(f"frames must lie in [0, {steps}] (scene.steps)")
+        return frames
