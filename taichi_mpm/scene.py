@@ -34,6 +34,11 @@ class Walls:
             raise SceneError(f"Walls.thickness={self.thickness} must be >= 1 cell")
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise SceneError(f"Walls.friction={self.friction} must be >= 0")
+        if self.friction > 0 and self.kind != "separate":
+            raise SceneError(
+                f"Walls.friction={self.friction} only acts on 'separate' walls; "
+                f"use Walls('separate', friction=...) or friction=0 with kind={self.kind!r}"
+            )
 
 
 @dataclass(frozen=True)

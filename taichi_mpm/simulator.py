@@ -94,11 +94,18 @@ class Simulator:
     def _segment_length(self, requested: int | None) -> int:
         steps = self.scene.steps
         if requested is not None:
-            if not requested >= 1:
+            if requested < 1:
                 raise ValueError(f"checkpoint_every={requested} must be >= 1")
             return min(requested, steps)
-        per_step = self.bytes_per_step()
-        return int(np.clip(SEGMENT_BUDGET_BYTES // per_step, 1, steps))
+        # Memory is steps/k checkpoints plus k recorded steps: k = sqrt(steps * ckpt / step)
+        # minimises it; longer segments (fewer launches) are used while they fit the budget.
+        per_step, per_checkpoint = self.bytes_per_step(), self.bytes_per_checkpoint()
+        balanced = int(np.sqrt(steps * per_checkpoint / per_step))
+        return int(np.clip(max(SEGMENT_BUDGET_BYTES // per_step, balanced), 1, steps))
+
+    def bytes_per_checkpoint(self) -> int:
+        """Memory of one stored state (x, v, C, F)."""
+        return (8 if self._dtype == ti.f64 else 4) * 24 * self.scene.num_particles
 
     def bytes_per_step(self) -> int:
         """Memory one recorded step takes (values, gradients and SVD factors)."""
@@ -165,68 +172,86 @@ class Simulator:
 
     def _constitutive_phases(self, material: Material) -> list[tuple[object, Callable, bool]]:
         """(kernel, args(slot), differentiated) for the plastic then the elastic law."""
+        C = constitutive
         serial, tol = self._serial, self._tol
-        F, Fc, params = self.F, self.F_corrected, self.params
+        F, Fc, params, stress = self.F, self.F_corrected, self.params, self.stress
+        coeff = self._coefficients
         phases: list[tuple[object, Callable, bool]] = []
 
-        def spectral(kernel, source, basis, law_code, coeff_name, target):
-            coeff = self._coefficients[coeff_name]
+        def decompose(source, basis, law, law_coeff, next_law, next_coeff):
             phases.append(
                 (
-                    constitutive.decompose,
-                    lambda s: (source, s, params, law_code, *basis, coeff, tol, serial),
+                    C.decompose,
+                    lambda s: (
+                        source,
+                        s,
+                        params,
+                        law,
+                        law_coeff,
+                        next_law,
+                        next_coeff,
+                        *basis,
+                        tol,
+                        serial,
+                    ),
                     False,
                 )
-            )
-            phases.append(
-                (kernel, lambda s: (source, s, *basis, coeff, params, target, serial), True)
             )
 
         plastic = material.plastic
         components = (
             plastic.components if isinstance(plastic, PlasticMixture) else ((1.0, plastic),)
         )
+        spectral_plastic = {
+            VonMises: (C.plastic_von_mises, C.LAW_VON_MISES, "von_mises"),
+            DruckerPrager: (C.plastic_sand, C.LAW_SAND, "sand"),
+        }
+        elastic_law = {
+            FixedCorotated: (C.stress_corotated, C.LAW_UNIT),
+            StVKHencky: (C.stress_stvk_hencky, C.LAW_HENCKY),
+        }.get(type(material.elastic))
+        # A single SVD-based plastic law (or none) leaves F_corrected = U diag(S') V^T: the
+        # elastic law reuses that SVD instead of decomposing F_corrected again.
+        single = len(components) == 1 and not isinstance(components[0][1], WeaklyCompressibleFluid)
+        share = elastic_law is not None and single
+        trial = self._trial_basis
         for _, law in components:
-            if isinstance(law, VonMises):
-                spectral(
-                    constitutive.plastic_von_mises,
-                    F,
-                    self._trial_basis,
-                    constitutive.LAW_VON_MISES,
-                    "von_mises",
-                    Fc,
-                )
-            elif isinstance(law, DruckerPrager):
-                spectral(
-                    constitutive.plastic_sand,
-                    F,
-                    self._trial_basis,
-                    constitutive.LAW_SAND,
-                    "sand",
-                    Fc,
+            if type(law) in spectral_plastic:
+                kernel, code, name = spectral_plastic[type(law)]
+                next_law = elastic_law[1] if share else C.NO_LAW
+                decompose(F, trial, code, coeff[name], next_law, coeff["elastic"])
+                phases.append(
+                    (kernel, lambda s, k=name: (F, s, *trial, coeff[k], params, Fc, serial), True)
                 )
             else:
+                if share:
+                    decompose(
+                        F, trial, C.NO_LAW, coeff["elastic"], elastic_law[1], coeff["elastic"]
+                    )
                 kernel = (
-                    constitutive.plastic_fluid
+                    C.plastic_fluid
                     if isinstance(law, WeaklyCompressibleFluid)
-                    else constitutive.plastic_identity
+                    else C.plastic_identity
                 )
-                phases.append((kernel, lambda s, k=kernel: (F, s, params, Fc, serial), True))
-        elastic = material.elastic
-        if isinstance(elastic, FixedCorotated | StVKHencky):
-            kernel, code = (
-                (constitutive.stress_corotated, constitutive.LAW_UNIT)
-                if isinstance(elastic, FixedCorotated)
-                else (constitutive.stress_stvk_hencky, constitutive.LAW_HENCKY)
+                phases.append((kernel, lambda s: (F, s, params, Fc, serial), True))
+        if elastic_law is not None:
+            basis = trial if share else self._elastic_basis
+            if not share:
+                decompose(Fc, basis, C.NO_LAW, coeff["elastic"], elastic_law[1], coeff["elastic"])
+            phases.append(
+                (
+                    elastic_law[0],
+                    lambda s: (Fc, s, *basis, coeff["elastic"], params, stress, serial),
+                    True,
+                )
             )
-            spectral(kernel, Fc, self._elastic_basis, code, "elastic", self.stress)
         else:
             kernel = (
-                constitutive.stress_linear
-                if isinstance(elastic, LinearElastic)
-                else constitutive.stress_neo_hookean
+                C.stress_linear
+                if isinstance(material.elastic, LinearElastic)
+                else C.stress_neo_hookean
             )
-            phases.append((kernel, lambda s: (Fc, s, params, self.stress, serial), True))
+            phases.append((kernel, lambda s: (Fc, s, params, stress, serial), True))
         return phases
 
     @property

@@ -98,7 +98,36 @@ def hencky_piola_sigma(sigma, prm):
 
 # ------------------------------------------------------------- SVD and its coefficients
 
-LAW_UNIT, LAW_VON_MISES, LAW_SAND, LAW_HENCKY = 0, 1, 2, 3
+NO_LAW, LAW_UNIT, LAW_VON_MISES, LAW_SAND, LAW_HENCKY = -1, 0, 1, 2, 3
+
+
+@ti.func
+def law_sigma(law, sigma, prm):
+    """The singular-value law ``law`` applied to sigma (forward only)."""
+    out = sigma
+    if law == LAW_UNIT:
+        out = unit_sigma(sigma, prm)
+    elif law == LAW_VON_MISES:
+        out = von_mises_sigma(sigma, prm)
+    elif law == LAW_SAND:
+        out = drucker_prager_sigma(sigma, prm)
+    elif law == LAW_HENCKY:
+        out = hencky_piola_sigma(sigma, prm)
+    return out
+
+
+@ti.func
+def law_coefficients(law, sigma, prm, tol):
+    out = ti.Matrix.zero(float, 3, 2)
+    if law == LAW_UNIT:
+        out = pair_coefficients(sigma, unit_sigma, prm, tol)
+    elif law == LAW_VON_MISES:
+        out = pair_coefficients(sigma, von_mises_sigma, prm, tol)
+    elif law == LAW_SAND:
+        out = pair_coefficients(sigma, drucker_prager_sigma, prm, tol)
+    elif law == LAW_HENCKY:
+        out = pair_coefficients(sigma, hencky_piola_sigma, prm, tol)
+    return out
 
 
 @ti.kernel
@@ -107,27 +136,33 @@ def decompose(
     slot: ti.i32,
     params: ti.types.ndarray(),
     law: ti.i32,
+    coeff: ti.types.ndarray(),
+    next_law: ti.i32,
+    next_coeff: ti.types.ndarray(),
     U: ti.types.ndarray(),
     V: ti.types.ndarray(),
-    coeff: ti.types.ndarray(),
     tol: float,
     serial: ti.template(),
 ):
-    """SVD of F[slot] and the gradient coefficients of ``law`` (forward only)."""
+    """SVD of F[slot] and the gradient coefficients of ``law`` (forward only).
+
+    When ``next_law`` is set, also the coefficients of ``next_law`` at the singular values
+    ``law`` produces: U diag(law(S)) V^T is the SVD of the plastic law's output, so the
+    elastic law that follows it shares this decomposition.
+    """
     ti.loop_config(serialize=serial)
     for p in range(F.shape[1]):
         prm = material_constants(params)
         u, s, v = singular_values(F[slot, p])
         U[slot, p] = u
         V[slot, p] = v
-        if law == LAW_UNIT:
-            coeff[slot, p] = pair_coefficients(s, unit_sigma, prm, tol)
-        elif law == LAW_VON_MISES:
-            coeff[slot, p] = pair_coefficients(s, von_mises_sigma, prm, tol)
-        elif law == LAW_SAND:
-            coeff[slot, p] = pair_coefficients(s, drucker_prager_sigma, prm, tol)
-        else:
-            coeff[slot, p] = pair_coefficients(s, hencky_piola_sigma, prm, tol)
+        if law != NO_LAW:
+            coeff[slot, p] = law_coefficients(law, s, prm, tol)
+        if next_law != NO_LAW:
+            s_next = s
+            if law != NO_LAW:
+                s_next = law_sigma(law, s, prm)
+            next_coeff[slot, p] = law_coefficients(next_law, s_next, prm, tol)
 
 
 # ------------------------------------------------------------------- plastic kernels

@@ -46,13 +46,18 @@ def pair_coefficients(S, law: ti.template(), prm, tol):
     coefficients = ti.Matrix.zero(float, 3, 2)
     for row in ti.static(range(3)):
         i, j = PAIRS[row]
-        mid = 0.5 * (S[i] + S[j])
-        gap = signed_floor(S[j] - S[i], tol)
-        spread = S
-        spread[i] = mid - 0.5 * gap
-        spread[j] = mid + 0.5 * gap
-        g_spread = law(spread, prm)
-        D = (g_spread[j] - g_spread[i]) / gap
+        gap = S[j] - S[i]
+        D = 0.0
+        if ti.abs(gap) >= tol:
+            D = (g[j] - g[i]) / gap
+        else:
+            gap = signed_floor(gap, tol)
+            mid = 0.5 * (S[i] + S[j])
+            spread = S
+            spread[i] = mid - 0.5 * gap
+            spread[j] = mid + 0.5 * gap
+            g_spread = law(spread, prm)
+            D = (g_spread[j] - g_spread[i]) / gap
         P = (g[j] + g[i]) / signed_floor(S[j] + S[i], tol)
         coefficients[row, 0] = 0.5 * (D + P)
         coefficients[row, 1] = 0.5 * (D - P)

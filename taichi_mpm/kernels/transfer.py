@@ -11,7 +11,7 @@ import taichi as ti
 from taichi_mpm.kernels.linalg import identity, matmul, matvec, outer
 
 MASS_FLOOR = 1e-12  # grid velocity = momentum / max(mass, floor): no NaN gradients
-SLIP, STICKY, SEPARATE = 0, 1, 2
+SLIP, STICKY, SEPARATE = 0, 1, 2  # slip is SEPARATE with zero friction
 TANGENT_TINY = 1e-20
 
 
@@ -63,23 +63,20 @@ def p2g(
 
 @ti.func
 def apply_walls(v, node, n, kind, thickness, friction):
-    """Box walls ``thickness`` cells deep on every face."""
+    """Box walls ``thickness`` cells deep on every face (slip is friction 0)."""
     for d in ti.static(range(3)):
-        near_low = node[d] < thickness
-        near_high = node[d] >= n - thickness
-        if kind == STICKY:
-            if near_low or near_high:
-                v = ti.Vector.zero(float, 3)
-        else:
-            into_wall = (near_low and v[d] < 0) or (near_high and v[d] > 0)
-            if into_wall:
-                normal_speed = ti.abs(v[d])
-                tangent = v
-                tangent[d] = 0.0
-                if kind == SEPARATE:
-                    speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
-                    tangent *= ti.max(0.0, 1.0 - friction * normal_speed / speed)
-                v = tangent
+        unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
+        low = node[d] < thickness
+        high = node[d] >= n - thickness
+        into_wall = ti.cast((low & (v[d] < 0)) | (high & (v[d] > 0)), float)
+        near_wall = ti.cast(low | high, float)
+        tangent = v - v[d] * unit
+        speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
+        slid = tangent * ti.max(0.0, 1.0 - friction * ti.abs(v[d]) / speed)
+        sticky = ti.cast(kind == STICKY, float)
+        v = sticky * (1.0 - near_wall) * v + (1.0 - sticky) * (
+            into_wall * slid + (1.0 - into_wall) * v
+        )
     return v
 
 
