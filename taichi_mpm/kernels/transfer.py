@@ -8,11 +8,12 @@ dynamic stencil loops gave wrong gradients in Taichi 1.7.
 
 import taichi as ti
 
-from taichi_mpm.kernels.linalg import identity, matmul, matvec, outer
+from taichi_mpm.kernels.linalg import identity, matmul, matvec, outer, sum_terms
 
 MASS_FLOOR = 1e-12  # grid velocity = momentum / max(mass, floor): no NaN gradients
 SLIP, STICKY, SEPARATE = 0, 1, 2  # slip is SEPARATE with zero friction
 TANGENT_TINY = 1e-20
+STENCIL = [(i, j, k) for i in range(3) for j in range(3) for k in range(3)]  # 27 nodes
 
 
 @ti.func
@@ -101,9 +102,13 @@ def grid_update(
         n = grid_mass.shape[1]
         gravity = ti.Vector([gx, gy, gz])
         mass = grid_mass[slot, i, j, k]
-        v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
-        v = apply_walls(v, ti.Vector([i, j, k]), n, wall_kind, wall_thickness, wall_friction)
-        grid_velocity[slot, i, j, k] = v
+        if mass > 0:  # most nodes are empty: skip them (G2P never reads them)
+            v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
+            grid_velocity[slot, i, j, k] = apply_walls(
+                v, ti.Vector([i, j, k]), n, wall_kind, wall_thickness, wall_friction
+            )
+        else:
+            grid_velocity[slot, i, j, k] = ti.Vector.zero(float, 3)
 
 
 @ti.kernel
@@ -125,16 +130,19 @@ def g2p(
         n = grid_velocity.shape[1]
         inv_dx = 1.0 / dx
         base, fx, w = stencil(x[slot, p], inv_dx, n)
-        new_v = ti.Vector.zero(float, 3)
-        new_C = ti.Matrix.zero(float, 3, 3)
-        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            offset = ti.Vector([i, j, k])
-            dpos = ti.cast(offset, float) - fx
-            weight = w[i][0] * w[j][1] * w[k][2]
-            node = base + offset
-            g_v = grid_velocity[slot, node[0], node[1], node[2]]
-            new_v = new_v + weight * g_v
-            new_C = new_C + (4.0 * inv_dx * weight) * outer(g_v, dpos)
+        momenta = [
+            w[i][0] * w[j][1] * w[k][2] * grid_velocity[slot, base[0] + i, base[1] + j, base[2] + k]
+            for i, j, k in ti.static(STENCIL)
+        ]
+        new_v = sum_terms(momenta, 0, 27)
+        new_C = (4.0 * inv_dx) * sum_terms(
+            [
+                outer(momenta[node], ti.Vector(STENCIL[node], dt=float) - fx)
+                for node in ti.static(range(27))
+            ],
+            0,
+            27,
+        )
         v[slot + 1, p] = new_v
         C[slot + 1, p] = new_C
         x[slot + 1, p] = x[slot, p] + dt * new_v
