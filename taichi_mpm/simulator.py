@@ -21,7 +21,7 @@ import numpy as np
 import taichi as ti
 
 from taichi_mpm import runtime
-from taichi_mpm.kernels import constitutive, slots, transfer
+from taichi_mpm.kernels import constitutive, slots, step, transfer
 from taichi_mpm.materials import (
     PARAMETER_INDEX,
     DruckerPrager,
@@ -170,80 +170,48 @@ class Simulator:
         self._phases = self._constitutive_phases(material)
         self.params.from_numpy(material.parameter_array().astype(self._numpy_dtype))
 
-    def _constitutive_phases(self, material: Material) -> list[tuple[object, Callable, bool]]:
-        """(kernel, args(slot), differentiated) for the plastic then the elastic law."""
+    def _constitutive_phases(self, material: Material) -> list[tuple[object, Callable]]:
+        """(kernel, args(slot)) of the plastic then the elastic law, differentiated in reverse.
+
+        Also sets ``self._share_basis``: a single SVD-based plastic law (or none) leaves
+        F_corrected = U diag(S') V^T, and an SVD-based elastic law then reuses that SVD.
+        """
         C = constitutive
-        serial, tol = self._serial, self._tol
+        serial = self._serial
         F, Fc, params, stress = self.F, self.F_corrected, self.params, self.stress
         coeff = self._coefficients
-        phases: list[tuple[object, Callable, bool]] = []
-
-        def decompose(source, basis, law, law_coeff, next_law, next_coeff):
-            phases.append(
-                (
-                    C.decompose,
-                    lambda s: (
-                        source,
-                        s,
-                        params,
-                        law,
-                        law_coeff,
-                        next_law,
-                        next_coeff,
-                        *basis,
-                        tol,
-                        serial,
-                    ),
-                    False,
-                )
-            )
-
         plastic = material.plastic
         components = (
             plastic.components if isinstance(plastic, PlasticMixture) else ((1.0, plastic),)
         )
-        spectral_plastic = {
-            VonMises: (C.plastic_von_mises, C.LAW_VON_MISES, "von_mises"),
-            DruckerPrager: (C.plastic_sand, C.LAW_SAND, "sand"),
-        }
-        elastic_law = {
-            FixedCorotated: (C.stress_corotated, C.LAW_UNIT),
-            StVKHencky: (C.stress_stvk_hencky, C.LAW_HENCKY),
-        }.get(type(material.elastic))
-        # A single SVD-based plastic law (or none) leaves F_corrected = U diag(S') V^T: the
-        # elastic law reuses that SVD instead of decomposing F_corrected again.
+        spectral_elastic = isinstance(material.elastic, FixedCorotated | StVKHencky)
         single = len(components) == 1 and not isinstance(components[0][1], WeaklyCompressibleFluid)
-        share = elastic_law is not None and single
+        self._share_basis = spectral_elastic and single
         trial = self._trial_basis
+        phases: list[tuple[object, Callable]] = []
         for _, law in components:
-            if type(law) in spectral_plastic:
-                kernel, code, name = spectral_plastic[type(law)]
-                next_law = elastic_law[1] if share else C.NO_LAW
-                decompose(F, trial, code, coeff[name], next_law, coeff["elastic"])
+            if isinstance(law, VonMises | DruckerPrager):
+                name = "von_mises" if isinstance(law, VonMises) else "sand"
+                kernel = C.plastic_von_mises if name == "von_mises" else C.plastic_sand
                 phases.append(
-                    (kernel, lambda s, k=name: (F, s, *trial, coeff[k], params, Fc, serial), True)
+                    (kernel, lambda s, k=name: (F, s, *trial, coeff[k], params, Fc, serial))
                 )
             else:
-                if share:
-                    decompose(
-                        F, trial, C.NO_LAW, coeff["elastic"], elastic_law[1], coeff["elastic"]
-                    )
                 kernel = (
                     C.plastic_fluid
                     if isinstance(law, WeaklyCompressibleFluid)
                     else C.plastic_identity
                 )
-                phases.append((kernel, lambda s: (F, s, params, Fc, serial), True))
-        if elastic_law is not None:
-            basis = trial if share else self._elastic_basis
-            if not share:
-                decompose(Fc, basis, C.NO_LAW, coeff["elastic"], elastic_law[1], coeff["elastic"])
+                phases.append((kernel, lambda s: (F, s, params, Fc, serial)))
+        if spectral_elastic:
+            kernel = (
+                C.stress_corotated
+                if isinstance(material.elastic, FixedCorotated)
+                else C.stress_stvk_hencky
+            )
+            basis = trial if self._share_basis else self._elastic_basis
             phases.append(
-                (
-                    elastic_law[0],
-                    lambda s: (Fc, s, *basis, coeff["elastic"], params, stress, serial),
-                    True,
-                )
+                (kernel, lambda s: (Fc, s, *basis, coeff["elastic"], params, stress, serial))
             )
         else:
             kernel = (
@@ -251,7 +219,7 @@ class Simulator:
                 if isinstance(material.elastic, LinearElastic)
                 else C.stress_neo_hookean
             )
-            phases.append((kernel, lambda s: (Fc, s, params, stress, serial), True))
+            phases.append((kernel, lambda s: (Fc, s, params, stress, serial)))
         return phases
 
     @property
@@ -260,22 +228,57 @@ class Simulator:
 
     # ------------------------------------------------------------------ one step
 
-    def _substep(self, s: int) -> None:
-        """Advance slot s to slot s + 1 (all phases of one MPM step)."""
-        for kernel, args, _ in self._phases:
-            kernel(*args(s))
-        transfer.p2g(*self._p2g_args(s))
-        transfer.grid_update(*self._grid_args(s))
-        transfer.g2p(*self._g2p_args(s))
+    def _advance(self, steps: int) -> None:
+        """Run slots 0 .. steps - 1 forward, recording every value the reverse pass reads."""
+        sc, walls = self.scene, self.scene.walls
+        arrays = (
+            self.x,
+            self.v,
+            self.C,
+            self.F,
+            self.F_corrected,
+            self.stress,
+            self.grid_mass,
+            self.grid_momentum,
+            self.grid_velocity,
+            self.params,
+            *self._trial_basis,
+            self._coefficients["von_mises"],
+            self._coefficients["sand"],
+            *self._elastic_basis,
+            self._coefficients["elastic"],
+        )
+        settings = (
+            self._material.elastic_kind,
+            int(self._share_basis),
+            self._tol,
+            sc.dx,
+            sc.dt,
+            sc.particle_volume,
+            sc.particle_mass,
+            *sc.gravity,
+            _WALL_CODES[walls.kind],
+            walls.thickness,
+            self._wall_friction,
+        )
+        if self._serial:
+            step.advance(*arrays, 0, steps, *settings)
+        else:
+            for s in range(steps):
+                step.step_parallel(*arrays, s, s + 1, *settings)
 
     def _substep_grad(self, s: int) -> None:
-        """Reverse of :meth:`_substep` (SVD factors and coefficients are constants)."""
+        """Reverse of step s: the phases' gradient kernels in reverse order."""
         transfer.g2p.grad(*self._g2p_args(s))
         transfer.grid_update.grad(*self._grid_args(s))
         transfer.p2g.grad(*self._p2g_args(s))
-        for kernel, args, differentiated in reversed(self._phases):
-            if differentiated:
-                kernel.grad(*args(s))
+        for kernel, args in reversed(self._phases):
+            kernel.grad(*args(s))
+
+    @property
+    def _wall_friction(self) -> float:
+        walls = self.scene.walls
+        return walls.friction if walls.kind == "separate" else 0.0
 
     def _p2g_args(self, s: int):
         sc = self.scene
@@ -305,7 +308,7 @@ class Simulator:
             *sc.gravity,
             _WALL_CODES[walls.kind],
             walls.thickness,
-            walls.friction,
+            self._wall_friction,
             self._serial,
         )
 
@@ -340,11 +343,7 @@ class Simulator:
             slots.copy_slot(carry, 0, array, 0)
 
     def _run_segment(self, steps: int) -> None:
-        self.grid_mass.fill(0)
-        self.grid_momentum.fill(0)
-        self.F_corrected.fill(0)
-        for s in range(steps):
-            self._substep(s)
+        self._advance(steps)
 
     def _store_checkpoint(self, segment: int) -> None:
         for array, store in zip(self._state, self._checkpoints, strict=True):
@@ -440,7 +439,7 @@ class Simulator:
             self.grid_momentum,
             self.grid_velocity,
         ):
-            array.grad.fill(0)
+            slots.clear(array.grad)
 
     def _collect_gradients(self) -> Gradients:
         param_grad = self.params.grad.to_numpy()

@@ -102,22 +102,8 @@ NO_LAW, LAW_UNIT, LAW_VON_MISES, LAW_SAND, LAW_HENCKY = -1, 0, 1, 2, 3
 
 
 @ti.func
-def law_sigma(law, sigma, prm):
-    """The singular-value law ``law`` applied to sigma (forward only)."""
-    out = sigma
-    if law == LAW_UNIT:
-        out = unit_sigma(sigma, prm)
-    elif law == LAW_VON_MISES:
-        out = von_mises_sigma(sigma, prm)
-    elif law == LAW_SAND:
-        out = drucker_prager_sigma(sigma, prm)
-    elif law == LAW_HENCKY:
-        out = hencky_piola_sigma(sigma, prm)
-    return out
-
-
-@ti.func
 def law_coefficients(law, sigma, prm, tol):
+    """Gradient coefficients (spectral.pair_coefficients) of the singular-value law ``law``."""
     out = ti.Matrix.zero(float, 3, 2)
     if law == LAW_UNIT:
         out = pair_coefficients(sigma, unit_sigma, prm, tol)
@@ -130,42 +116,48 @@ def law_coefficients(law, sigma, prm, tol):
     return out
 
 
-@ti.kernel
-def decompose(
-    F: ti.types.ndarray(),
-    slot: ti.i32,
-    params: ti.types.ndarray(),
-    law: ti.i32,
-    coeff: ti.types.ndarray(),
-    next_law: ti.i32,
-    next_coeff: ti.types.ndarray(),
-    U: ti.types.ndarray(),
-    V: ti.types.ndarray(),
-    tol: float,
-    serial: ti.template(),
-):
-    """SVD of F[slot] and the gradient coefficients of ``law`` (forward only).
-
-    When ``next_law`` is set, also the coefficients of ``next_law`` at the singular values
-    ``law`` produces: U diag(law(S)) V^T is the SVD of the plastic law's output, so the
-    elastic law that follows it shares this decomposition.
-    """
-    ti.loop_config(serialize=serial)
-    for p in range(F.shape[1]):
-        prm = material_constants(params)
-        u, s, v = singular_values(F[slot, p])
-        U[slot, p] = u
-        V[slot, p] = v
-        if law != NO_LAW:
-            coeff[slot, p] = law_coefficients(law, s, prm, tol)
-        if next_law != NO_LAW:
-            s_next = s
-            if law != NO_LAW:
-                s_next = law_sigma(law, s, prm)
-            next_coeff[slot, p] = law_coefficients(next_law, s_next, prm, tol)
+# ---------------------------------------------------------------- elastic stress laws
 
 
-# ------------------------------------------------------------------- plastic kernels
+@ti.func
+def linear_stress(F, prm):
+    """Small strain: P = 2 mu eps + lam tr(eps) I, eps = sym(F) - I; tau = P F^T."""
+    mu, lam = lame(prm)
+    strain = 0.5 * (F + F.transpose()) - identity()
+    piola = 2.0 * mu * strain + lam * (strain[0, 0] + strain[1, 1] + strain[2, 2]) * identity()
+    return matmul_t(piola, F)
+
+
+@ti.func
+def neo_hookean_stress(F, prm):
+    """tau = mu (F F^T - I) + lam log(J) I."""
+    mu, lam = lame(prm)
+    J = ti.max(det(F), J_FLOOR)
+    return mu * (matmul_t(F, F) - identity()) + lam * ti.log(J) * identity()
+
+
+@ti.func
+def corotated_stress(F, U, V, coeff, prm):
+    """tau = 2 mu (F - R) F^T + lam (J - 1) J I, R the polar rotation."""
+    mu, lam = lame(prm)
+    R = isotropic_uv(F, U, V, coeff, unit_sigma, prm)
+    J = det(F)
+    return 2.0 * mu * matmul_t(F - R, F) + lam * (J - 1.0) * J * identity()
+
+
+@ti.func
+def stvk_hencky_stress(F, U, V, coeff, prm):
+    """tau = U (2 mu log S + lam tr(log S)) U^T, computed as P F^T."""
+    return matmul_t(isotropic_uv(F, U, V, coeff, hencky_piola_sigma, prm), F)
+
+
+@ti.func
+def fluid_deformation(F):
+    """J^(1/3) I: a weakly compressible fluid forgets all but its volume change."""
+    return ti.pow(ti.max(det(F), J_FLOOR), 1.0 / 3.0) * identity()
+
+
+# ---------------------------------------------- per-law kernels (differentiated by Taichi)
 
 
 def _spectral_plastic_kernel(law, weight_index: int):
@@ -220,85 +212,130 @@ def plastic_fluid(
     """F_corrected[slot] += w * J^(1/3) I (weakly compressible fluid)."""
     ti.loop_config(serialize=serial)
     for p in range(F.shape[1]):
-        J = ti.max(det(F[slot, p]), J_FLOOR)
-        F_corrected[slot, p] += params[W_FLUID] * ti.pow(J, 1.0 / 3.0) * identity()
+        F_corrected[slot, p] += params[W_FLUID] * fluid_deformation(F[slot, p])
 
 
-# ------------------------------------------------------------------- elastic kernels
+def _plain_stress_kernel(law):
+    @ti.kernel
+    def kernel(
+        F: ti.types.ndarray(),
+        slot: ti.i32,
+        params: ti.types.ndarray(),
+        stress: ti.types.ndarray(),
+        serial: ti.template(),
+    ):
+        ti.loop_config(serialize=serial)
+        for p in range(F.shape[1]):
+            stress[slot, p] = law(F[slot, p], material_constants(params))
+
+    return kernel
 
 
-@ti.kernel
-def stress_linear(
-    F: ti.types.ndarray(),
-    slot: ti.i32,
-    params: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    serial: ti.template(),
+def _spectral_stress_kernel(law):
+    @ti.kernel
+    def kernel(
+        F: ti.types.ndarray(),
+        slot: ti.i32,
+        U: ti.types.ndarray(),
+        V: ti.types.ndarray(),
+        coeff: ti.types.ndarray(),
+        params: ti.types.ndarray(),
+        stress: ti.types.ndarray(),
+        serial: ti.template(),
+    ):
+        ti.loop_config(serialize=serial)
+        for p in range(F.shape[1]):
+            prm = material_constants(params)
+            stress[slot, p] = law(F[slot, p], U[slot, p], V[slot, p], coeff[slot, p], prm)
+
+    return kernel
+
+
+stress_linear = _plain_stress_kernel(linear_stress)
+stress_neo_hookean = _plain_stress_kernel(neo_hookean_stress)
+stress_corotated = _spectral_stress_kernel(corotated_stress)
+stress_stvk_hencky = _spectral_stress_kernel(stvk_hencky_stress)
+
+
+# --------------------------------------------------- forward: all laws, chosen at run time
+
+LINEAR, COROTATED, NEO_HOOKEAN, STVK_HENCKY = 0, 1, 2, 3
+
+
+@ti.func
+def constitutive_update(
+    F: ti.template(),
+    F_corrected: ti.template(),
+    stress: ti.template(),
+    slot,
+    p,
+    params: ti.template(),
+    trial_U: ti.template(),
+    trial_V: ti.template(),
+    coeff_von_mises: ti.template(),
+    coeff_sand: ti.template(),
+    elastic_U: ti.template(),
+    elastic_V: ti.template(),
+    coeff_elastic: ti.template(),
+    elastic_kind,
+    share_basis,
+    tol,
 ):
-    """Small strain: P = 2 mu eps + lam tr(eps) I, eps = sym(F) - I; tau = P F^T."""
-    ti.loop_config(serialize=serial)
-    for p in range(F.shape[1]):
-        mu, lam = lame(material_constants(params))
-        Fp = F[slot, p]
-        strain = 0.5 * (Fp + Fp.transpose()) - identity()
-        piola = 2.0 * mu * strain + lam * (strain[0, 0] + strain[1, 1] + strain[2, 2]) * identity()
-        stress[slot, p] = matmul_t(piola, Fp)
+    """Plastic mixture then elastic law for particle p, recording what the backward needs.
 
-
-@ti.kernel
-def stress_neo_hookean(
-    F: ti.types.ndarray(),
-    slot: ti.i32,
-    params: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    serial: ti.template(),
-):
-    """tau = mu (F F^T - I) + lam log(J) I."""
-    ti.loop_config(serialize=serial)
-    for p in range(F.shape[1]):
-        mu, lam = lame(material_constants(params))
-        Fp = F[slot, p]
-        J = ti.max(det(Fp), J_FLOOR)
-        stress[slot, p] = mu * (matmul_t(Fp, Fp) - identity()) + lam * ti.log(J) * identity()
-
-
-@ti.kernel
-def stress_corotated(
-    F: ti.types.ndarray(),
-    slot: ti.i32,
-    U: ti.types.ndarray(),
-    V: ti.types.ndarray(),
-    coeff: ti.types.ndarray(),
-    params: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    serial: ti.template(),
-):
-    """tau = 2 mu (F - R) F^T + lam (J - 1) J I."""
-    ti.loop_config(serialize=serial)
-    for p in range(F.shape[1]):
-        prm = material_constants(params)
-        mu, lam = lame(prm)
-        Fp = F[slot, p]
-        R = isotropic_uv(Fp, U[slot, p], V[slot, p], coeff[slot, p], unit_sigma, prm)
-        J = det(Fp)
-        stress[slot, p] = 2.0 * mu * matmul_t(Fp - R, Fp) + lam * (J - 1.0) * J * identity()
-
-
-@ti.kernel
-def stress_stvk_hencky(
-    F: ti.types.ndarray(),
-    slot: ti.i32,
-    U: ti.types.ndarray(),
-    V: ti.types.ndarray(),
-    coeff: ti.types.ndarray(),
-    params: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    serial: ti.template(),
-):
-    """tau = U (2 mu log S + lam tr(log S)) U^T, computed as P F^T."""
-    ti.loop_config(serialize=serial)
-    for p in range(F.shape[1]):
-        prm = material_constants(params)
-        Fp = F[slot, p]
-        piola = isotropic_uv(Fp, U[slot, p], V[slot, p], coeff[slot, p], hencky_piola_sigma, prm)
-        stress[slot, p] = matmul_t(piola, Fp)
+    Writes F_corrected and stress, and the SVD factors and gradient coefficients that the
+    per-law kernels above read in reverse mode. With ``share_basis`` (a single SVD-based
+    plastic law, or none, before an SVD-based elastic law) F_corrected = U diag(S') V^T
+    and the elastic law reuses the trial SVD.
+    """
+    prm = material_constants(params)
+    Ft = F[slot, p]
+    w_von_mises, w_sand = params[W_VON_MISES], params[W_SAND]
+    spectral_elastic = (elastic_kind == COROTATED) | (elastic_kind == STVK_HENCKY)
+    elastic_law = LAW_HENCKY
+    if elastic_kind == COROTATED:
+        elastic_law = LAW_UNIT
+    Fc = ti.Matrix.zero(float, 3, 3)
+    if w_von_mises != 0 or w_sand != 0 or share_basis != 0:
+        u, s, v = singular_values(Ft)
+        trial_U[slot, p] = u
+        trial_V[slot, p] = v
+        s_next = s
+        if w_von_mises != 0:
+            c = law_coefficients(LAW_VON_MISES, s, prm, tol)
+            coeff_von_mises[slot, p] = c
+            Fc += w_von_mises * isotropic_uv(Ft, u, v, c, von_mises_sigma, prm)
+            s_next = von_mises_sigma(s, prm)
+        if w_sand != 0:
+            c = law_coefficients(LAW_SAND, s, prm, tol)
+            coeff_sand[slot, p] = c
+            Fc += w_sand * isotropic_uv(Ft, u, v, c, drucker_prager_sigma, prm)
+            s_next = drucker_prager_sigma(s, prm)
+        if share_basis != 0:
+            coeff_elastic[slot, p] = law_coefficients(elastic_law, s_next, prm, tol)
+    if params[W_IDENTITY] != 0:
+        Fc += params[W_IDENTITY] * Ft
+    if params[W_FLUID] != 0:
+        Fc += params[W_FLUID] * fluid_deformation(Ft)
+    F_corrected[slot, p] = Fc
+    if spectral_elastic and share_basis == 0:
+        u, s, v = singular_values(Fc)
+        elastic_U[slot, p] = u
+        elastic_V[slot, p] = v
+        coeff_elastic[slot, p] = law_coefficients(elastic_law, s, prm, tol)
+    tau = ti.Matrix.zero(float, 3, 3)
+    if elastic_kind == LINEAR:
+        tau = linear_stress(Fc, prm)
+    elif elastic_kind == NEO_HOOKEAN:
+        tau = neo_hookean_stress(Fc, prm)
+    else:
+        U = elastic_U[slot, p]
+        V = elastic_V[slot, p]
+        if share_basis != 0:
+            U = trial_U[slot, p]
+            V = trial_V[slot, p]
+        if elastic_kind == COROTATED:
+            tau = corotated_stress(Fc, U, V, coeff_elastic[slot, p], prm)
+        else:
+            tau = stvk_hencky_stress(Fc, U, V, coeff_elastic[slot, p], prm)
+    stress[slot, p] = tau

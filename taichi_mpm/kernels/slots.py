@@ -17,3 +17,11 @@ def add_to_slot(target: ti.types.ndarray(), slot: ti.i32, values: ti.types.ndarr
     """target[slot, :] += values[:] (seeds a loss gradient into a recorded frame)."""
     for p in range(values.shape[0]):
         target[slot, p] += values[p]
+
+
+@ti.kernel
+def clear(values: ti.types.ndarray()):
+    """Zero every element (serially: faster than a parallel fill for small arrays)."""
+    ti.loop_config(serialize=True)
+    for index in ti.grouped(values):
+        values[index] = ti.zero(values[index])

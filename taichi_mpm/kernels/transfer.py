@@ -27,6 +27,112 @@ def stencil(xp, inv_dx, n):
     return base, fx, w
 
 
+@ti.func
+def apply_walls(v, node, n, kind, thickness, friction):
+    """Box walls ``thickness`` cells deep on every face (slip is friction 0)."""
+    for d in ti.static(range(3)):
+        unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
+        low = node[d] < thickness
+        high = node[d] >= n - thickness
+        into_wall = ti.cast((low & (v[d] < 0)) | (high & (v[d] > 0)), float)
+        near_wall = ti.cast(low | high, float)
+        tangent = v - v[d] * unit
+        speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
+        slid = tangent * ti.max(0.0, 1.0 - friction * ti.abs(v[d]) / speed)
+        sticky = ti.cast(kind == STICKY, float)
+        v = sticky * (1.0 - near_wall) * v + (1.0 - sticky) * (
+            into_wall * slid + (1.0 - into_wall) * v
+        )
+    return v
+
+
+@ti.func
+def scatter(
+    x: ti.template(),
+    v: ti.template(),
+    C: ti.template(),
+    stress: ti.template(),
+    slot,
+    p,
+    grid_mass: ti.template(),
+    grid_momentum: ti.template(),
+    dx,
+    dt,
+    particle_volume,
+    particle_mass,
+):
+    """Particle p's mass, momentum and stress impulse onto its 27 grid nodes."""
+    inv_dx = 1.0 / dx
+    base, fx, w = stencil(x[slot, p], inv_dx, grid_mass.shape[1])
+    impulse = (-dt * particle_volume * 4.0 * inv_dx * inv_dx) * stress[slot, p]
+    affine = impulse + particle_mass * C[slot, p]
+    momentum = particle_mass * v[slot, p]
+    for i, j, k in ti.static(STENCIL):
+        dpos = (ti.Vector([i, j, k], dt=float) - fx) * dx
+        weight = w[i][0] * w[j][1] * w[k][2]
+        node = base + ti.Vector([i, j, k])
+        grid_momentum[slot, node[0], node[1], node[2]] += weight * (momentum + matvec(affine, dpos))
+        grid_mass[slot, node[0], node[1], node[2]] += weight * particle_mass
+
+
+@ti.func
+def update_node(
+    grid_mass: ti.template(),
+    grid_momentum: ti.template(),
+    slot,
+    i,
+    j,
+    k,
+    grid_velocity: ti.template(),
+    dt,
+    gravity,
+    wall_kind,
+    wall_thickness,
+    wall_friction,
+):
+    """Velocity of node (i, j, k) from its momentum, plus gravity and the walls."""
+    mass = grid_mass[slot, i, j, k]
+    if mass > 0:  # most nodes are empty: skip them (G2P never reads them)
+        v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
+        grid_velocity[slot, i, j, k] = apply_walls(
+            v, ti.Vector([i, j, k]), grid_mass.shape[1], wall_kind, wall_thickness, wall_friction
+        )
+    else:
+        grid_velocity[slot, i, j, k] = ti.Vector.zero(float, 3)
+
+
+@ti.func
+def gather(
+    x: ti.template(),
+    v: ti.template(),
+    C: ti.template(),
+    F: ti.template(),
+    F_corrected: ti.template(),
+    grid_velocity: ti.template(),
+    slot,
+    p,
+    dx,
+    dt,
+):
+    """Particle p's velocity and affine velocity from the grid; its state at slot + 1."""
+    inv_dx = 1.0 / dx
+    base, fx, w = stencil(x[slot, p], inv_dx, grid_velocity.shape[1])
+    momenta = [
+        w[i][0] * w[j][1] * w[k][2] * grid_velocity[slot, base[0] + i, base[1] + j, base[2] + k]
+        for i, j, k in ti.static(STENCIL)
+    ]
+    new_v = sum_terms(momenta, 0, 27)
+    new_C = (4.0 * inv_dx) * sum_terms(
+        [outer(momenta[n], ti.Vector(STENCIL[n], dt=float) - fx) for n in ti.static(range(27))],
+        0,
+        27,
+    )
+    v[slot + 1, p] = new_v
+    C[slot + 1, p] = new_C
+    x[slot + 1, p] = x[slot, p] + dt * new_v
+    F[slot + 1, p] = matmul(identity() + dt * new_C, F_corrected[slot, p])
+
+
 @ti.kernel
 def p2g(
     x: ti.types.ndarray(),
@@ -45,40 +151,20 @@ def p2g(
     """Scatter mass, momentum and the stress impulse of every particle to the grid."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        n = grid_mass.shape[1]
-        inv_dx = 1.0 / dx
-        base, fx, w = stencil(x[slot, p], inv_dx, n)
-        impulse = (-dt * particle_volume * 4.0 * inv_dx * inv_dx) * stress[slot, p]
-        affine = impulse + particle_mass * C[slot, p]
-        momentum = particle_mass * v[slot, p]
-        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            offset = ti.Vector([i, j, k])
-            dpos = (ti.cast(offset, float) - fx) * dx
-            weight = w[i][0] * w[j][1] * w[k][2]
-            node = base + offset
-            grid_momentum[slot, node[0], node[1], node[2]] += weight * (
-                momentum + matvec(affine, dpos)
-            )
-            grid_mass[slot, node[0], node[1], node[2]] += weight * particle_mass
-
-
-@ti.func
-def apply_walls(v, node, n, kind, thickness, friction):
-    """Box walls ``thickness`` cells deep on every face (slip is friction 0)."""
-    for d in ti.static(range(3)):
-        unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
-        low = node[d] < thickness
-        high = node[d] >= n - thickness
-        into_wall = ti.cast((low & (v[d] < 0)) | (high & (v[d] > 0)), float)
-        near_wall = ti.cast(low | high, float)
-        tangent = v - v[d] * unit
-        speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
-        slid = tangent * ti.max(0.0, 1.0 - friction * ti.abs(v[d]) / speed)
-        sticky = ti.cast(kind == STICKY, float)
-        v = sticky * (1.0 - near_wall) * v + (1.0 - sticky) * (
-            into_wall * slid + (1.0 - into_wall) * v
+        scatter(
+            x,
+            v,
+            C,
+            stress,
+            slot,
+            p,
+            grid_mass,
+            grid_momentum,
+            dx,
+            dt,
+            particle_volume,
+            particle_mass,
         )
-    return v
 
 
 @ti.kernel
@@ -99,16 +185,20 @@ def grid_update(
     """Grid velocity from momentum, plus gravity and the box walls."""
     ti.loop_config(serialize=serial)
     for i, j, k in ti.ndrange(grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]):
-        n = grid_mass.shape[1]
-        gravity = ti.Vector([gx, gy, gz])
-        mass = grid_mass[slot, i, j, k]
-        if mass > 0:  # most nodes are empty: skip them (G2P never reads them)
-            v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
-            grid_velocity[slot, i, j, k] = apply_walls(
-                v, ti.Vector([i, j, k]), n, wall_kind, wall_thickness, wall_friction
-            )
-        else:
-            grid_velocity[slot, i, j, k] = ti.Vector.zero(float, 3)
+        update_node(
+            grid_mass,
+            grid_momentum,
+            slot,
+            i,
+            j,
+            k,
+            grid_velocity,
+            dt,
+            ti.Vector([gx, gy, gz]),
+            wall_kind,
+            wall_thickness,
+            wall_friction,
+        )
 
 
 @ti.kernel
@@ -127,23 +217,4 @@ def g2p(
     """Gather velocity and affine velocity; advect; state of step slot + 1."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        n = grid_velocity.shape[1]
-        inv_dx = 1.0 / dx
-        base, fx, w = stencil(x[slot, p], inv_dx, n)
-        momenta = [
-            w[i][0] * w[j][1] * w[k][2] * grid_velocity[slot, base[0] + i, base[1] + j, base[2] + k]
-            for i, j, k in ti.static(STENCIL)
-        ]
-        new_v = sum_terms(momenta, 0, 27)
-        new_C = (4.0 * inv_dx) * sum_terms(
-            [
-                outer(momenta[node], ti.Vector(STENCIL[node], dt=float) - fx)
-                for node in ti.static(range(27))
-            ],
-            0,
-            27,
-        )
-        v[slot + 1, p] = new_v
-        C[slot + 1, p] = new_C
-        x[slot + 1, p] = x[slot, p] + dt * new_v
-        F[slot + 1, p] = matmul(identity() + dt * new_C, F_corrected[slot, p])
+        gather(x, v, C, F, F_corrected, grid_velocity, slot, p, dx, dt)
