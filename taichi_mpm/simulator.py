@@ -66,7 +66,8 @@ class Simulator:
         Steps per recorded segment. Default: as many as fit in 32 MiB.
         ``checkpoint_every=scene.steps`` stores the whole trajectory (no recompute).
     parallel : bool, optional
-        Parallel particle loops; default on from 20k particles.
+        Parallel loops. Default: on GPUs always, on the CPU from 20k particles (below
+        that a parallel launch costs more than the work).
     """
 
     def __init__(
@@ -80,9 +81,9 @@ class Simulator:
         self.scene = scene
         self._dtype = info.dtype
         self._tol = info.spectral_tol
-        self._serial = not (
-            parallel if parallel is not None else scene.num_particles >= PARALLEL_THRESHOLD
-        )
+        if parallel is None:  # GPUs always run parallel loops
+            parallel = info.arch != "cpu" or scene.num_particles >= PARALLEL_THRESHOLD
+        self._serial = not parallel
         self.segment = self._segment_length(checkpoint_every)
         self.num_segments = -(-scene.steps // self.segment)
         self._allocate()

@@ -87,3 +87,22 @@ def test_initial_velocity_gradient_matches_finite_differences():
             1.0,
             "initial velocity",
         )
+
+
+def test_parallel_loops_give_the_serial_results():
+    """The parallel forward kernel and parallel reverse kernels agree with the serial ones."""
+    scene, material = impact_scene(), MATERIALS["von_mises"]
+    results = []
+    for parallel in (False, True):
+        sim = tm.Simulator(scene, material, checkpoint_every=25, parallel=parallel)
+        positions = sim.forward(FRAMES)
+        grads = sim.backward(weighted_loss(positions)[1])
+        results.append((positions, grads))
+    (pos_serial, grads_serial), (pos_parallel, grads_parallel) = results
+    # Only the order of atomic additions differs: agreement to float64 round-off.
+    np.testing.assert_allclose(pos_parallel, pos_serial, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        grads_parallel.velocities, grads_serial.velocities, rtol=1e-9, atol=1e-12
+    )
+    for name, value in grads_serial.material.items():
+        assert relative_error(grads_parallel.material[name], value) < 1e-9, name
