@@ -5,6 +5,7 @@ own. Run from the repository root::
 
     python benchmarks/mpm_speed.py            # paper scene + 100k-particle scene
     python benchmarks/mpm_speed.py --quick    # paper scene only
+    python benchmarks/mpm_speed.py --profile  # where the paper scene's time goes
 
 Prints particle-steps per second, the wall time of the paper scene's 1000-step
 forward+backward, peak memory, and the cold (empty offline cache) and warm start-up.
@@ -18,6 +19,16 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
+
+import taichi_mpm as tm
+
+REPOSITORY = Path(__file__).resolve().parents[1]  # children import benchmarks.mpm_speed
+
+MATERIALS = {
+    "elastic": tm.Material(tm.NeoHookean(E=1e5, nu=0.3)),
+    "plastic": tm.Material(tm.StVKHencky(E=1e5, nu=0.2), tm.VonMises(yield_stress=3e3)),
+}
 
 CHILD = r"""
 import json, resource, sys, time
@@ -34,10 +45,8 @@ else:
     velocities = tm.rigid_velocity(positions, (1.0, -0.5, -0.75), (1.0, 3.0, 2.0))
     scene = tm.Scene(positions, velocities, volume, grid_resolution=config["grid"],
                      dt=2e-4, steps=config["steps"])
-material = {
-    "elastic": tm.Material(tm.NeoHookean(E=1e5, nu=0.3)),
-    "plastic": tm.Material(tm.StVKHencky(E=1e5, nu=0.2), tm.VonMises(yield_stress=3e3)),
-}[config["material"]]
+from benchmarks.mpm_speed import MATERIALS
+material = MATERIALS[config["material"]]
 sim = tm.Simulator(scene, material)
 frames = np.linspace(0, scene.steps, 11).astype(int)
 positions = sim.forward(frames)
@@ -60,12 +69,36 @@ print(json.dumps({
 """
 
 
+PROFILE = r"""
+import sys, time
+import numpy as np
+import taichi as ti
+import taichi_mpm as tm
+from benchmarks.mpm_speed import MATERIALS
+
+tm.init(arch=sys.argv[1], precision="float32", kernel_profiler=True)
+for name, material in MATERIALS.items():
+    sim = tm.Simulator(tm.paper_scene(), material)
+    frames = np.linspace(0, 1000, 11).astype(int)
+    sim.backward(np.ones_like(sim.forward(frames)))  # compile
+    ti.profiler.clear_kernel_profiler_info()
+    t = time.perf_counter()
+    sim.backward(np.ones_like(sim.forward(frames)))
+    wall = time.perf_counter() - t
+    records = ti.profiler.get_kernel_profiler_total_time()
+    print(f"--- paper scene, {name}: forward+backward {wall:.2f} s, "
+          f"of which in kernels {records:.2f} s, launches and Python {wall - records:.2f} s")
+    ti.profiler.print_kernel_profiler_info("count")
+"""
+
+
 def run(config: dict) -> dict:
     out = subprocess.run(
         [sys.executable, "-c", CHILD, json.dumps(config)],
         check=True,
         capture_output=True,
         text=True,
+        cwd=REPOSITORY,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -75,7 +108,11 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="paper scene only")
     parser.add_argument("--arch", default="cpu", help="cpu, cuda, vulkan or gpu")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--profile", action="store_true", help="kernel profile of the paper scene")
     args = parser.parse_args()
+    if args.profile:
+        subprocess.run([sys.executable, "-c", PROFILE, args.arch], check=True, cwd=REPOSITORY)
+        return
 
     scenes = [{"scene": "paper", "steps": 1000}]
     if not args.quick:

@@ -21,6 +21,7 @@ from taichi_mpm.materials import (
 from taichi_mpm.runtime import init
 from taichi_mpm.scene import Scene, SceneError, Walls, cube, paper_scene, rigid_velocity, sphere
 from taichi_mpm.simulator import Gradients, Simulator
+from taichi_mpm.warmup import warm_up
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -45,4 +46,5 @@ __all__ = [
     "paper_scene",
     "rigid_velocity",
     "sphere",
+    "warm_up",
 ]
