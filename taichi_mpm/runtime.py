@@ -25,6 +25,7 @@ class RuntimeInfo:
 
     arch: str
     precision: str
+    backend: str  # what Taichi actually runs on (it falls back to the CPU without a GPU)
 
     @property
     def dtype(self):
@@ -78,7 +79,9 @@ def init(
         log_level=taichi_options.pop("log_level", ti.WARN),
         **taichi_options,
     )
-    _current = RuntimeInfo(arch=arch, precision=precision)
+    backend = ti.lang.impl.current_cfg().arch.name  # no public accessor in Taichi 1.7
+    backend = "cpu" if backend in ("x64", "arm64") else backend
+    _current = RuntimeInfo(arch=arch, precision=precision, backend=backend)
     return _current
 
 
