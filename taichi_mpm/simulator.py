@@ -64,7 +64,8 @@ class Simulator:
         Constitutive law; change it between runs with :attr:`material`.
     checkpoint_every : int, optional
         Steps per recorded segment. Default: as many as fit in 32 MiB.
-        ``checkpoint_every=scene.steps`` stores the whole trajectory (no recompute).
+        ``checkpoint_every=scene.steps`` records the whole trajectory in the forward pass,
+        so the backward pass re-runs nothing.
     parallel : bool, optional
         Parallel loops. Default: on GPUs always, on the CPU from 20k particles (below
         that a parallel launch costs more than the work).
@@ -87,8 +88,8 @@ class Simulator:
         self.segment = self._segment_length(checkpoint_every)
         self.num_segments = -(-scene.steps // self.segment)
         self._allocate()
-        self.material = material
         self._frames: np.ndarray | None = None
+        self.material = material
 
     # ------------------------------------------------------------------ set-up
 
@@ -168,6 +169,8 @@ class Simulator:
                 f"material must be a taichi_mpm.Material, got {type(material).__name__}"
             )
         self._material = material
+        self._frames = None  # a recorded trajectory belongs to the old material
+        self._recorded_segment: int | None = None
         self._phases = self._constitutive_phases(material)
         self.params.from_numpy(material.parameter_array().astype(self._numpy_dtype))
 
@@ -266,7 +269,7 @@ class Simulator:
             step.advance(*arrays, 0, steps, *settings)
         else:
             for s in range(steps):
-                step.step_parallel(*arrays, s, s + 1, *settings)
+                step.step_parallel(*arrays, s, *settings)
 
     def _substep_grad(self, s: int) -> None:
         """Reverse of step s: the phases' gradient kernels in reverse order."""
@@ -343,9 +346,6 @@ class Simulator:
         for array, carry in zip(self._state, self._carry, strict=True):
             slots.copy_slot(carry, 0, array, 0)
 
-    def _run_segment(self, steps: int) -> None:
-        self._advance(steps)
-
     def _store_checkpoint(self, segment: int) -> None:
         for array, store in zip(self._state, self._checkpoints, strict=True):
             slots.copy_slot(array, 0, store, segment)
@@ -377,20 +377,26 @@ class Simulator:
         positions = np.empty((len(frames), self.scene.num_particles, 3))
         for segment in range(self.num_segments):
             start, steps = segment * self.segment, self._segment_steps(segment)
+            if segment > 0:
+                self._shift_last_to_first(self.segment)
             self._store_checkpoint(segment)
-            self._run_segment(steps)
+            self._advance(steps)
             wanted = np.nonzero((frames >= start) & (frames <= start + steps))[0]
             if len(wanted):
                 recorded = self.x.to_numpy()
                 positions[wanted] = recorded[frames[wanted] - start]
-            self._shift_last_to_first(steps)
+        # The last segment stays recorded: backward starts there without re-running it.
+        self._recorded_segment = self.num_segments - 1
         self._frames = frames
         return positions
 
     def final_state(self) -> dict[str, np.ndarray]:
         """x, v, C, F after the last :meth:`forward` call."""
+        if self._frames is None:
+            raise RuntimeError("call forward() before final_state()")
+        last = self._segment_steps(self.num_segments - 1)
         return {
-            name: array.to_numpy()[0]
+            name: array.to_numpy()[last]
             for name, array in zip(("x", "v", "C", "F"), self._state, strict=True)
         }
 
@@ -415,8 +421,10 @@ class Simulator:
         self.params.grad.fill(0)
         for segment in reversed(range(self.num_segments)):
             start, steps = segment * self.segment, self._segment_steps(segment)
-            self._restore_checkpoint(segment)
-            self._run_segment(steps)
+            if self._recorded_segment != segment:
+                self._restore_checkpoint(segment)
+                self._advance(steps)
+                self._recorded_segment = segment
             self._zero_grads()
             if segment < self.num_segments - 1:
                 for array, carry in zip(self._state, self._carry, strict=True):

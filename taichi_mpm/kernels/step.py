@@ -131,7 +131,6 @@ def step_parallel(
     elastic_V: ti.types.ndarray(),
     coeff_elastic: ti.types.ndarray(),
     s: ti.i32,
-    unused_last: ti.i32,
     elastic_kind: ti.i32,
     share_basis: ti.i32,
     tol: float,
@@ -146,7 +145,7 @@ def step_parallel(
     wall_thickness: ti.i32,
     wall_friction: float,
 ):
-    """Slot s advanced to s + 1 with parallel loops (same arguments as :func:`advance`)."""
+    """Slot s advanced to s + 1 with parallel loops (arguments as :func:`advance`, one slot)."""
     for p in range(x.shape[1]):
         constitutive_update(
             F,
