@@ -3,14 +3,84 @@
 The forward pass records everything the reverse pass reads, so it need not run phase by
 phase: :func:`advance` runs many steps of a small scene in one serial kernel (a Taichi
 launch with ndarray arguments costs 15-50 us, more than a 1000-particle phase), and
-:func:`step_parallel` runs one step of a large scene with parallel loops. Both call the
-same Taichi functions as the per-phase kernels that the reverse pass differentiates.
+:func:`step_parallel` runs one step of a large scene with parallel loops. Both run
+:func:`mpm_step`, which calls the same Taichi functions as the per-phase kernels that
+the reverse pass differentiates.
 """
 
 import taichi as ti
 
 from taichi_mpm.kernels.constitutive import constitutive_update
 from taichi_mpm.kernels.transfer import gather, scatter, update_node
+
+
+@ti.func
+def mpm_step(
+    s,
+    a: ti.template(),
+    elastic_kind,
+    share,
+    tol,
+    dx,
+    dt,
+    volume,
+    mass,
+    gx,
+    gy,
+    gz,
+    kind,
+    thickness,
+    friction,
+):
+    """Slot s to s + 1: laws, clear grid slot s, P2G, grid update, G2P.
+
+    ``a`` is the compile-time tuple of the arrays :func:`advance` takes, the rest its
+    scalars. Called at a kernel's top level its loops run in parallel; called inside a
+    serial loop they run serially.
+    """
+    x, v, C, F, Fc, stress, grid_mass, grid_momentum, grid_velocity = ti.static(a[:9])
+    for p in range(x.shape[1]):
+        constitutive_update(
+            F,
+            Fc,
+            stress,
+            s,
+            p,
+            a[9],
+            a[10],
+            a[11],
+            a[12],
+            a[13],
+            a[14],
+            a[15],
+            a[16],
+            elastic_kind,
+            share,
+            tol,
+        )
+    n = grid_mass.shape[1]
+    for i, j, k in ti.ndrange(n, n, n):
+        grid_mass[s, i, j, k] = 0.0
+        grid_momentum[s, i, j, k] = ti.Vector.zero(float, 3)
+    for p in range(x.shape[1]):
+        scatter(x, v, C, stress, s, p, grid_mass, grid_momentum, dx, dt, volume, mass)
+    for i, j, k in ti.ndrange(n, n, n):
+        update_node(
+            grid_mass,
+            grid_momentum,
+            s,
+            i,
+            j,
+            k,
+            grid_velocity,
+            dt,
+            ti.Vector([gx, gy, gz]),
+            kind,
+            thickness,
+            friction,
+        )
+    for p in range(x.shape[1]):
+        gather(x, v, C, F, Fc, grid_velocity, s, p, dx, dt)
 
 
 @ti.kernel
@@ -48,67 +118,47 @@ def advance(
     wall_thickness: ti.i32,
     wall_friction: float,
 ):
-    """Slots first .. last - 1 advanced to first + 1 .. last, serially, in one launch.
-
-    Each step clears its own grid slot first, so no array needs clearing beforehand.
-    """
+    """Slots first .. last - 1 advanced to first + 1 .. last, serially, in one launch."""
+    arrays = ti.static(
+        (
+            x,
+            v,
+            C,
+            F,
+            F_corrected,
+            stress,
+            grid_mass,
+            grid_momentum,
+            grid_velocity,
+            params,
+            trial_U,
+            trial_V,
+            coeff_von_mises,
+            coeff_sand,
+            elastic_U,
+            elastic_V,
+            coeff_elastic,
+        )
+    )
     ti.loop_config(serialize=True)
     for s in range(first, last):
-        for p in range(x.shape[1]):
-            constitutive_update(
-                F,
-                F_corrected,
-                stress,
-                s,
-                p,
-                params,
-                trial_U,
-                trial_V,
-                coeff_von_mises,
-                coeff_sand,
-                elastic_U,
-                elastic_V,
-                coeff_elastic,
-                elastic_kind,
-                share_basis,
-                tol,
-            )
-        n = grid_mass.shape[1]
-        for i, j, k in ti.ndrange(n, n, n):
-            grid_mass[s, i, j, k] = 0.0
-            grid_momentum[s, i, j, k] = ti.Vector.zero(float, 3)
-        for p in range(x.shape[1]):
-            scatter(
-                x,
-                v,
-                C,
-                stress,
-                s,
-                p,
-                grid_mass,
-                grid_momentum,
-                dx,
-                dt,
-                particle_volume,
-                particle_mass,
-            )
-        for i, j, k in ti.ndrange(n, n, n):
-            update_node(
-                grid_mass,
-                grid_momentum,
-                s,
-                i,
-                j,
-                k,
-                grid_velocity,
-                dt,
-                ti.Vector([gx, gy, gz]),
-                wall_kind,
-                wall_thickness,
-                wall_friction,
-            )
-        for p in range(x.shape[1]):
-            gather(x, v, C, F, F_corrected, grid_velocity, s, p, dx, dt)
+        mpm_step(
+            s,
+            arrays,
+            elastic_kind,
+            share_basis,
+            tol,
+            dx,
+            dt,
+            particle_volume,
+            particle_mass,
+            gx,
+            gy,
+            gz,
+            wall_kind,
+            wall_thickness,
+            wall_friction,
+        )
 
 
 @ti.kernel
@@ -146,13 +196,17 @@ def step_parallel(
     wall_friction: float,
 ):
     """Slot s advanced to s + 1 with parallel loops (arguments as :func:`advance`, one slot)."""
-    for p in range(x.shape[1]):
-        constitutive_update(
+    arrays = ti.static(
+        (
+            x,
+            v,
+            C,
             F,
             F_corrected,
             stress,
-            s,
-            p,
+            grid_mass,
+            grid_momentum,
+            grid_velocity,
             params,
             trial_U,
             trial_V,
@@ -161,31 +215,22 @@ def step_parallel(
             elastic_U,
             elastic_V,
             coeff_elastic,
-            elastic_kind,
-            share_basis,
-            tol,
         )
-    for i, j, k in ti.ndrange(grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]):
-        grid_mass[s, i, j, k] = 0.0
-        grid_momentum[s, i, j, k] = ti.Vector.zero(float, 3)
-    for p in range(x.shape[1]):
-        scatter(
-            x, v, C, stress, s, p, grid_mass, grid_momentum, dx, dt, particle_volume, particle_mass
-        )
-    for i, j, k in ti.ndrange(grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]):
-        update_node(
-            grid_mass,
-            grid_momentum,
-            s,
-            i,
-            j,
-            k,
-            grid_velocity,
-            dt,
-            ti.Vector([gx, gy, gz]),
-            wall_kind,
-            wall_thickness,
-            wall_friction,
-        )
-    for p in range(x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, s, p, dx, dt)
+    )
+    mpm_step(
+        s,
+        arrays,
+        elastic_kind,
+        share_basis,
+        tol,
+        dx,
+        dt,
+        particle_volume,
+        particle_mass,
+        gx,
+        gy,
+        gz,
+        wall_kind,
+        wall_thickness,
+        wall_friction,
+    )
