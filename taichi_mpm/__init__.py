@@ -19,7 +19,16 @@ from taichi_mpm.materials import (
     WeaklyCompressibleFluid,
 )
 from taichi_mpm.runtime import init
-from taichi_mpm.scene import Scene, SceneError, Walls, cube, paper_scene, rigid_velocity, sphere
+from taichi_mpm.scene import (
+    Scene,
+    SceneError,
+    Walls,
+    cube,
+    paper_scene,
+    rigid_velocity,
+    rigid_velocity_gradient,
+    sphere,
+)
 from taichi_mpm.simulator import Gradients, Simulator
 from taichi_mpm.warmup import warm_up
 
@@ -45,6 +54,7 @@ __all__ = [
     "init",
     "paper_scene",
     "rigid_velocity",
+    "rigid_velocity_gradient",
     "sphere",
     "warm_up",
 ]

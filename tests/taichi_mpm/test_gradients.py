@@ -115,3 +115,25 @@ def test_backward_twice_gives_the_same_gradients():
     first, second = sim.backward(weights), sim.backward(weights)
     assert first.material == second.material
     np.testing.assert_array_equal(first.velocities, second.velocities)
+
+
+def test_angular_velocity_gradient_by_chain_rule():
+    """rigid_velocity_gradient turns dL/dv0 into dL/d(angular velocity) of a rigid spin."""
+    base = impact_scene()
+    linear, angular = np.array([0.8, -3.0, 0.3]), np.array([2.0, -1.0, 3.0])
+
+    def scene_with(omega):
+        return base.with_velocities(tm.rigid_velocity(base.positions, linear, omega))
+
+    material = MATERIALS["neo_hookean"]
+    sim = tm.Simulator(scene_with(angular), material, checkpoint_every=25)
+    weights = weighted_loss(sim.forward(FRAMES))[1]
+    _, d_angular = tm.rigid_velocity_gradient(base.positions, sim.backward(weights).velocities)
+    for axis in range(3):
+        unit = np.eye(3)[axis]
+        assert_matches_central_difference(
+            d_angular[axis],
+            lambda h, u=unit: loss_of(scene_with(angular + h * u), material),
+            1.0,
+            f"angular velocity[{axis}]",
+        )
