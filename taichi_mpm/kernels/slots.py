@@ -21,7 +21,6 @@ def add_to_slot(target: ti.types.ndarray(), slot: ti.i32, values: ti.types.ndarr
 
 @ti.kernel
 def clear(values: ti.types.ndarray()):
-    """Zero every element (serially: faster than a parallel fill for small arrays)."""
-    ti.loop_config(serialize=True)
+    """Zero every element."""
     for index in ti.grouped(values):
         values[index] = ti.zero(values[index])

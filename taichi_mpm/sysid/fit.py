@@ -1,0 +1,275 @@
+"""Fit material parameters to an observed trajectory through the differentiable simulator."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from taichi_mpm.materials import Material
+from taichi_mpm.simulator import Simulator
+from taichi_mpm.sysid import parameters
+from taichi_mpm.sysid.observation import Observation
+
+OPTIMIZERS = ("adam", "lbfgs")
+
+
+class FitError(ValueError):
+    """A fit was set up wrongly; the message names the argument and the fix."""
+
+
+@dataclass
+class FitResult:
+    """One fit: the values found, and how the optimizer got there."""
+
+    values: dict[str, float]
+    loss: float
+    loss_curve: list[float]
+    history: dict[str, list[float]]
+    iterations: int
+    converged: bool
+    backoffs: int = 0
+    initial_velocity: np.ndarray | None = None  # (linear, angular) when fitted
+    gradient_norm: float = float("nan")
+
+
+@dataclass
+class Objective:
+    """Loss and gradient in unconstrained coordinates u, one simulation each."""
+
+    observation: Observation
+    material: Material
+    names: list[str]
+    fit_velocity: bool = False
+    checkpoint_every: int | None = None
+    evaluations: int = field(default=0, init=False)
+
+    def __post_init__(self) -> None:
+        self._sim = Simulator(self.observation.scene, self.material, self.checkpoint_every)
+        self._scale = 1.0 / (self.observation.positions.size * self.observation.body_size**2)
+
+    @property
+    def size(self) -> int:
+        return len(self.names) + (6 if self.fit_velocity else 0)
+
+    def split(self, u: np.ndarray):
+        n = len(self.names)
+        return u[:n], (u[n : n + 3], u[n + 3 : n + 6]) if self.fit_velocity else None
+
+    def __call__(self, u: np.ndarray) -> tuple[float, np.ndarray | None]:
+        """(loss, dloss/du); (inf, None) when the simulation blows up."""
+        from taichi_mpm.scene import rigid_velocity, rigid_velocity_gradient
+
+        self.evaluations += 1
+        obs = self.observation
+        material_u, velocity = self.split(u)
+        values = parameters.to_values(self.names, material_u)
+        try:
+            self._sim.material = self.material.replace(**values)
+        except ValueError:
+            return float("inf"), None
+        if velocity is not None:
+            self._sim.scene = obs.scene.with_velocities(
+                rigid_velocity(obs.scene.positions, velocity[0], velocity[1])
+            )
+        simulated = self._sim.forward(obs.frame_steps)[:, obs.particle_indices]
+        residual = simulated - obs.positions
+        loss = float(self._scale * (residual**2).sum())
+        if not np.isfinite(loss):
+            return float("inf"), None
+        seed = np.zeros((len(obs.frame_steps), obs.scene.num_particles, 3))
+        seed[:, obs.particle_indices] = 2.0 * self._scale * residual
+        grads = self._sim.backward(seed)
+        grad_u = parameters.chain(self.names, material_u, grads.material)
+        if velocity is not None:
+            d_linear, d_angular = rigid_velocity_gradient(obs.scene.positions, grads.velocities)
+            grad_u = np.concatenate([grad_u, d_linear, d_angular])
+        if not np.all(np.isfinite(grad_u)):
+            return float("inf"), None
+        return loss, grad_u
+
+
+def fit(
+    observation: Observation,
+    material: Material,
+    names: Sequence[str] | None = None,
+    optimizer: str = "adam",
+    iterations: int = 200,
+    learning_rate: float = 0.05,
+    tolerance: float = 1e-4,
+    patience: int = 10,
+    fit_velocity: bool = False,
+    initial_velocity: tuple[Sequence[float], Sequence[float]] | None = None,
+    checkpoint_every: int | None = None,
+    callback: Callable[[int, float, dict[str, float]], None] | None = None,
+) -> FitResult:
+    """Fit ``names`` (default: all parameters of ``material``) to ``observation``.
+
+    Parameters
+    ----------
+    observation : Observation
+        Observed positions and the scene they come from.
+    material : Material
+        The material family with initial guesses for its parameters.
+    names : sequence of str, optional
+        Parameters to fit; the others stay at their values in ``material``.
+    optimizer : {"adam", "lbfgs"}
+        Adam with ``learning_rate`` in unconstrained coordinates, or L-BFGS with a
+        backtracking line search.
+    iterations : int
+        Most optimizer steps.
+    tolerance, patience : float, int
+        Stop when the best loss improved by less than ``tolerance`` (relative) over the
+        last ``patience`` steps.
+    fit_velocity : bool
+        Also fit the initial linear and angular velocity of the body (a rigid motion),
+        starting from ``initial_velocity`` (default: zero).
+    callback : callable, optional
+        Called as ``callback(iteration, loss, values)`` after every step.
+    """
+    available = material.parameters()
+    names = list(available if names is None else names)
+    unknown = [name for name in names if name not in available]
+    if unknown:
+        raise FitError(f"cannot fit {unknown}: this material has parameters {sorted(available)}")
+    if not names and not fit_velocity:
+        raise FitError("nothing to fit: give parameter names or fit_velocity=True")
+    if optimizer not in OPTIMIZERS:
+        raise FitError(f"optimizer={optimizer!r} is unknown; use one of {OPTIMIZERS}")
+    if iterations < 1 or learning_rate <= 0 or patience < 1:
+        raise FitError("iterations and patience must be >= 1 and learning_rate > 0")
+    objective = Objective(observation, material, names, fit_velocity, checkpoint_every)
+    u = parameters.to_unconstrained({name: available[name] for name in names})
+    if fit_velocity:
+        linear, angular = initial_velocity if initial_velocity is not None else ((0,) * 3,) * 2
+        u = np.concatenate([u, np.asarray(linear, float), np.asarray(angular, float)])
+    step = _adam if optimizer == "adam" else _lbfgs
+    return step(objective, u, iterations, learning_rate, tolerance, patience, callback)
+
+
+class _Tracker:
+    """Loss curve, parameter history, best point and the stopping rule."""
+
+    def __init__(self, objective: Objective, tolerance: float, patience: int, callback) -> None:
+        self.objective, self.tolerance, self.patience = objective, tolerance, patience
+        self.callback = callback
+        self.curve: list[float] = []
+        self.history: dict[str, list[float]] = {name: [] for name in objective.names}
+        self.best = (float("inf"), None, None)
+        self.backoffs = 0
+
+    def record(self, u: np.ndarray, loss: float, grad: np.ndarray) -> None:
+        values = parameters.to_values(self.objective.names, self.objective.split(u)[0])
+        self.curve.append(loss)
+        for name, value in values.items():
+            self.history[name].append(value)
+        if loss < self.best[0]:
+            self.best = (loss, u.copy(), grad)
+        if self.callback is not None:
+            self.callback(len(self.curve), loss, values)
+
+    def converged(self) -> bool:
+        if len(self.curve) <= self.patience:
+            return False
+        before = min(self.curve[: -self.patience])
+        return before - self.best[0] <= self.tolerance * before
+
+    def result(self) -> FitResult:
+        loss, u, grad = self.best
+        material_u, velocity = self.objective.split(u)
+        return FitResult(
+            values=parameters.to_values(self.objective.names, material_u),
+            loss=loss,
+            loss_curve=self.curve,
+            history=self.history,
+            iterations=len(self.curve),
+            converged=self.converged(),
+            backoffs=self.backoffs,
+            initial_velocity=None if velocity is None else np.concatenate(velocity),
+            gradient_norm=float(np.linalg.norm(grad)),
+        )
+
+
+def _first_evaluation(objective: Objective, u: np.ndarray) -> tuple[float, np.ndarray]:
+    loss, grad = objective(u)
+    if grad is None:
+        raise FitError(
+            "the simulation diverges at the initial guess (NaN positions); start from a "
+            "softer material, a smaller dt or a smaller initial velocity"
+        )
+    return loss, grad
+
+
+def _adam(objective, u, iterations, lr, tolerance, patience, callback) -> FitResult:
+    tracker = _Tracker(objective, tolerance, patience, callback)
+    loss, grad = _first_evaluation(objective, u)
+    tracker.record(u, loss, grad)
+    m, v = np.zeros_like(u), np.zeros_like(u)
+    beta1, beta2, eps = 0.9, 0.999, 1e-8
+    t = 0
+    while len(tracker.curve) < iterations and not tracker.converged():
+        t += 1
+        m = beta1 * m + (1 - beta1) * grad
+        v = beta2 * v + (1 - beta2) * grad**2
+        trial = u - lr * (m / (1 - beta1**t)) / (np.sqrt(v / (1 - beta2**t)) + eps)
+        trial_loss, trial_grad = objective(trial)
+        if trial_grad is None:  # unstable: back off, keep the last good point
+            lr *= 0.5
+            tracker.backoffs += 1
+            m[:] = 0.0
+            v[:] = 0.0
+            t = 0
+            if tracker.backoffs > 20:
+                break
+            continue
+        u, loss, grad = trial, trial_loss, trial_grad
+        tracker.record(u, loss, grad)
+    return tracker.result()
+
+
+def _lbfgs(objective, u, iterations, lr, tolerance, patience, callback, memory=8) -> FitResult:
+    tracker = _Tracker(objective, tolerance, patience, callback)
+    loss, grad = _first_evaluation(objective, u)
+    tracker.record(u, loss, grad)
+    s_list: list[np.ndarray] = []
+    y_list: list[np.ndarray] = []
+    while len(tracker.curve) < iterations and not tracker.converged():
+        direction = -_two_loop(grad, s_list, y_list)
+        if direction @ grad >= 0:  # not a descent direction: restart from the gradient
+            s_list.clear()
+            y_list.clear()
+            direction = -grad
+        step = 1.0 if s_list else min(1.0, lr / (np.abs(direction).max() + 1e-300))
+        for _ in range(20):  # backtracking (Armijo) line search
+            trial = u + step * direction
+            trial_loss, trial_grad = objective(trial)
+            if trial_grad is not None and trial_loss <= loss + 1e-4 * step * (direction @ grad):
+                break
+            step *= 0.5
+            tracker.backoffs += trial_grad is None
+        else:
+            break
+        s, y = trial - u, trial_grad - grad
+        if s @ y > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
+            s_list.append(s)
+            y_list.append(y)
+            del s_list[:-memory], y_list[:-memory]
+        u, loss, grad = trial, trial_loss, trial_grad
+        tracker.record(u, loss, grad)
+    return tracker.result()
+
+
+def _two_loop(grad: np.ndarray, s_list, y_list) -> np.ndarray:
+    """L-BFGS estimate of H^-1 grad."""
+    q = grad.copy()
+    alphas = []
+    for s, y in zip(reversed(s_list), reversed(y_list), strict=True):
+        alpha = (s @ q) / (y @ s)
+        alphas.append(alpha)
+        q -= alpha * y
+    if s_list:
+        q *= (s_list[-1] @ y_list[-1]) / (y_list[-1] @ y_list[-1])
+    for (s, y), alpha in zip(zip(s_list, y_list, strict=True), reversed(alphas), strict=True):
+        q += (alpha - (y @ q) / (y @ s)) * s
+    return q
