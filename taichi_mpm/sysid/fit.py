@@ -240,7 +240,8 @@ def _lbfgs(objective, u, iterations, lr, tolerance, patience, callback, memory=8
             s_list.clear()
             y_list.clear()
             direction = -grad
-        step = 1.0 if s_list else min(1.0, lr / (np.abs(direction).max() + 1e-300))
+        # Without curvature pairs yet, the first step moves u by ``lr`` at most.
+        step = 1.0 if s_list else lr / (np.abs(direction).max() + 1e-300)
         for _ in range(20):  # backtracking (Armijo) line search
             trial = u + step * direction
             trial_loss, trial_grad = objective(trial)

@@ -67,6 +67,39 @@ def test_neo_hookean_recovered_under_one_percent_noise():
     assert max(errors.values()) < 0.10, result.values
 
 
+HENCKY = tm.StVKHencky(E=5e4, nu=0.3)
+PLASTIC_CASES = {
+    # material, the parameter fitted, a guess 2x-3x off
+    "von_mises_yield_stress": (tm.Material(HENCKY, tm.VonMises(2e3)), "yield_stress", 5e3),
+    "sand_friction_angle": (tm.Material(HENCKY, tm.DruckerPrager(30.0)), "friction_angle", 12.0),
+    # nu is known, so fitting E fits the bulk modulus K = E / (3 (1 - 2 nu))
+    "fluid_bulk_modulus": (
+        tm.Material(tm.StVKHencky(E=2e4, nu=0.3), tm.WeaklyCompressibleFluid()),
+        "E",
+        6e4,
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PLASTIC_CASES))
+@pytest.mark.parametrize("noise", [0.0, 0.01])
+def test_plastic_parameters_recovered(case, noise):
+    truth, name, guess = PLASTIC_CASES[case]
+    observation = synthetic(truth, noise=noise)
+    result = fit(
+        observation,
+        truth.replace(**{name: guess}),
+        names=[name],
+        optimizer="lbfgs",
+        learning_rate=0.5,
+        iterations=60,
+        tolerance=1e-7,
+        patience=10,
+    )
+    error = abs(result.values[name] / truth.parameters()[name] - 1.0)
+    assert error < (0.10 if noise else 0.02), (case, result.values)
+
+
 def test_fit_rejects_unknown_parameters_and_optimizers():
     observation = synthetic(tm.Material(tm.NeoHookean(E=5e4, nu=0.3)))
     material = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
