@@ -1,6 +1,7 @@
 """System identification: material parameters from observed motion, with taichi_mpm alone."""
 
 from taichi_mpm.sysid.fit import FitError, FitResult, fit
+from taichi_mpm.sysid.identify import Identification, identify
 from taichi_mpm.sysid.observation import (
     Observation,
     ObservationError,
@@ -12,9 +13,11 @@ from taichi_mpm.sysid.observation import (
 __all__ = [
     "FitError",
     "FitResult",
+    "Identification",
     "Observation",
     "ObservationError",
     "fit",
+    "identify",
     "load_observation",
     "observation_from_times",
     "save_observation",
