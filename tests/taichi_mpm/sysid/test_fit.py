@@ -107,3 +107,24 @@ def test_fit_rejects_unknown_parameters_and_optimizers():
         fit(observation, material, names=["yield_stress"])
     with pytest.raises(FitError, match="use one of"):
         fit(observation, material, optimizer="sgd")
+
+
+def test_initial_velocity_fitted_jointly_when_not_observed():
+    truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
+    observation = synthetic(truth)
+    result = fit(
+        observation,
+        truth.replace(E=1.5e5),
+        names=["E"],
+        optimizer="lbfgs",
+        learning_rate=0.5,
+        iterations=100,
+        tolerance=1e-9,
+        patience=15,
+        fit_velocity=True,
+        initial_velocity=((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+    )
+    linear, angular = result.initial_velocity[:3], result.initial_velocity[3:]
+    np.testing.assert_allclose(linear, [0.8, -2.0, 0.3], atol=0.02)
+    np.testing.assert_allclose(angular, [2.0, -1.0, 3.0], atol=0.05)
+    assert abs(result.values["E"] / 5e4 - 1) < 0.02, result.values
