@@ -128,3 +128,20 @@ def test_initial_velocity_fitted_jointly_when_not_observed():
     np.testing.assert_allclose(linear, [0.8, -2.0, 0.3], atol=0.02)
     np.testing.assert_allclose(angular, [2.0, -1.0, 3.0], atol=0.05)
     assert abs(result.values["E"] / 5e4 - 1) < 0.02, result.values
+
+
+def test_unstable_step_backs_off_instead_of_crashing():
+    """A huge first step makes E 3000x too stiff for dt: the fit halves its step and goes on."""
+    truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
+    result = fit(
+        synthetic(truth),
+        truth.replace(E=2e4),
+        names=["E"],
+        optimizer="adam",
+        learning_rate=8.0,
+        iterations=30,
+        tolerance=1e-8,
+        patience=20,
+    )
+    assert result.backoffs >= 1
+    assert np.isfinite(result.loss) and result.loss < result.loss_curve[0]
