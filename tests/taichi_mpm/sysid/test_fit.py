@@ -145,3 +145,23 @@ def test_unstable_step_backs_off_instead_of_crashing():
     )
     assert result.backoffs >= 1
     assert np.isfinite(result.loss) and result.loss < result.loss_curve[0]
+
+
+def test_fit_from_a_subset_of_particles_and_sparse_frames():
+    truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
+    scene = thrown_cube()
+    frames = np.array([50, 100, 150])  # three frames only
+    subset = np.random.default_rng(3).choice(scene.num_particles, 20, replace=False)
+    observed = tm.Simulator(scene, truth).forward(frames)[:, subset]
+    observation = observation_from_times(scene, observed, frames * scene.dt, subset)
+    result = fit(
+        observation,
+        truth.replace(E=1.5e5, nu=0.15),
+        optimizer="lbfgs",
+        learning_rate=0.5,
+        iterations=100,
+        tolerance=1e-9,
+        patience=15,
+    )
+    errors = relative_errors(result.values, truth.parameters())
+    assert max(errors.values()) < 0.02, result.values
