@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from taichi_mpm.materials import Material
+from taichi_mpm.scene import rigid_velocity, rigid_velocity_gradient
 from taichi_mpm.simulator import Simulator
 from taichi_mpm.sysid import parameters
 from taichi_mpm.sysid.observation import Observation
@@ -59,8 +60,6 @@ class Objective:
 
     def __call__(self, u: np.ndarray) -> tuple[float, np.ndarray | None]:
         """(loss, dloss/du); (inf, None) when the simulation blows up."""
-        from taichi_mpm.scene import rigid_velocity, rigid_velocity_gradient
-
         self.evaluations += 1
         obs = self.observation
         material_u, velocity = self.split(u)
