@@ -14,6 +14,9 @@ from taichi_mpm.sysid import parameters
 from taichi_mpm.sysid.observation import Observation
 
 OPTIMIZERS = ("adam", "lbfgs")
+PLATEAU_CUTS = 3  # Adam: step cuts on plateaus before it stops
+MAX_BACKOFFS = 20  # steps undone because the simulation blew up, before giving up
+LINE_SEARCH_HALVINGS = 10  # L-BFGS: below 2^-10 of the step, no descent is left
 
 
 class FitError(ValueError):
@@ -138,6 +141,14 @@ def fit(
         raise FitError(f"optimizer={optimizer!r} is unknown; use one of {OPTIMIZERS}")
     if iterations < 1 or learning_rate <= 0 or patience < 1:
         raise FitError("iterations and patience must be >= 1 and learning_rate > 0")
+    for name in names:
+        transform = parameters.TRANSFORMS[name]
+        if not transform.low < available[name] < transform.high:
+            raise FitError(
+                f"{name}={available[name]} is on the edge of its range "
+                f"({transform.low}, {transform.high}); start from a value inside it "
+                f"(for example {name}=1e-3) or leave {name} out of the fitted names"
+            )
     objective = Objective(observation, material, names, fit_velocity, checkpoint_every)
     u = parameters.to_unconstrained({name: available[name] for name in names})
     if fit_velocity:
@@ -157,6 +168,8 @@ class _Tracker:
         self.history: dict[str, list[float]] = {name: [] for name in objective.names}
         self.best = (float("inf"), None, None)
         self.backoffs = 0
+        self.window_start = 0  # plateaus are judged on iterations from here on
+        self.stalled = False  # set when no step can lower the loss any more
 
     def record(self, u: np.ndarray, loss: float, grad: np.ndarray) -> None:
         values = parameters.to_values(self.objective.names, self.objective.split(u)[0])
@@ -168,11 +181,16 @@ class _Tracker:
         if self.callback is not None:
             self.callback(len(self.curve), loss, values)
 
-    def converged(self) -> bool:
-        if len(self.curve) <= self.patience:
+    def plateau(self) -> bool:
+        """The best loss improved by less than ``tolerance`` over ``patience`` iterations."""
+        window = self.curve[self.window_start :]
+        if len(window) <= self.patience:
             return False
-        before = min(self.curve[: -self.patience])
+        before = min(window[: -self.patience])
         return before - self.best[0] <= self.tolerance * before
+
+    def converged(self) -> bool:
+        return self.stalled or self.plateau()
 
     def result(self) -> FitResult:
         loss, u, grad = self.best
@@ -201,13 +219,24 @@ def _first_evaluation(objective: Objective, u: np.ndarray) -> tuple[float, np.nd
 
 
 def _adam(objective, u, iterations, lr, tolerance, patience, callback) -> FitResult:
+    """Adam; on a plateau it restarts from the best point with a 3x smaller step, and
+    stops once the step has been cut :data:`PLATEAU_CUTS` times."""
     tracker = _Tracker(objective, tolerance, patience, callback)
     loss, grad = _first_evaluation(objective, u)
     tracker.record(u, loss, grad)
     m, v = np.zeros_like(u), np.zeros_like(u)
     beta1, beta2, eps = 0.9, 0.999, 1e-8
-    t = 0
-    while len(tracker.curve) < iterations and not tracker.converged():
+    t, cuts = 0, 0
+    while len(tracker.curve) < iterations:
+        if tracker.plateau():
+            if cuts == PLATEAU_CUTS:
+                break
+            cuts += 1
+            lr /= 3.0
+            _, best_u, best_grad = tracker.best
+            u, grad = best_u.copy(), best_grad
+            m[:], v[:], t = 0.0, 0.0, 0
+            tracker.window_start = len(tracker.curve)
         t += 1
         m = beta1 * m + (1 - beta1) * grad
         v = beta2 * v + (1 - beta2) * grad**2
@@ -216,10 +245,8 @@ def _adam(objective, u, iterations, lr, tolerance, patience, callback) -> FitRes
         if trial_grad is None:  # unstable: back off, keep the last good point
             lr *= 0.5
             tracker.backoffs += 1
-            m[:] = 0.0
-            v[:] = 0.0
-            t = 0
-            if tracker.backoffs > 20:
+            m[:], v[:], t = 0.0, 0.0, 0
+            if tracker.backoffs > MAX_BACKOFFS:
                 break
             continue
         u, loss, grad = trial, trial_loss, trial_grad
@@ -233,7 +260,7 @@ def _lbfgs(objective, u, iterations, lr, tolerance, patience, callback, memory=8
     tracker.record(u, loss, grad)
     s_list: list[np.ndarray] = []
     y_list: list[np.ndarray] = []
-    while len(tracker.curve) < iterations and not tracker.converged():
+    while len(tracker.curve) < iterations and not tracker.plateau():
         direction = -_two_loop(grad, s_list, y_list)
         if direction @ grad >= 0:  # not a descent direction: restart from the gradient
             s_list.clear()
@@ -241,14 +268,15 @@ def _lbfgs(objective, u, iterations, lr, tolerance, patience, callback, memory=8
             direction = -grad
         # Without curvature pairs yet, the first step moves u by ``lr`` at most.
         step = 1.0 if s_list else lr / (np.abs(direction).max() + 1e-300)
-        for _ in range(20):  # backtracking (Armijo) line search
+        for _ in range(LINE_SEARCH_HALVINGS):  # backtracking (Armijo) line search
             trial = u + step * direction
             trial_loss, trial_grad = objective(trial)
             if trial_grad is not None and trial_loss <= loss + 1e-4 * step * (direction @ grad):
                 break
             step *= 0.5
             tracker.backoffs += trial_grad is None
-        else:
+        else:  # no decrease along a descent direction: the loss is at its floor
+            tracker.stalled = True
             break
         s, y = trial - u, trial_grad - grad
         if s @ y > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):

@@ -130,13 +130,25 @@ def _spread(material: Material, names: list[str], rng) -> Material:
     return material.replace(**spread)
 
 
+VELOCITY_NAMES = [f"{kind}_velocity_{axis}" for kind in ("linear", "angular") for axis in "xyz"]
+
+
 def _curvature(observation: Observation, fitted: Material, names: list[str], best: FitResult):
-    """Relative standard deviations, the Hessian, and warnings from the loss curvature."""
+    """Relative standard deviations, the Hessian, and warnings from the loss curvature.
+
+    With a fitted initial velocity the Hessian covers it too, so the material's
+    uncertainty includes what the unknown velocity leaves open.
+    """
     if not names:
         return {}, np.zeros((0, 0)), []
-    objective = Objective(observation, fitted, names)
+    velocity = best.initial_velocity
+    objective = Objective(observation, fitted, names, fit_velocity=velocity is not None)
     u0 = parameters.to_unconstrained({name: best.values[name] for name in names})
-    n = len(names)
+    labels = list(names)
+    if velocity is not None:
+        u0 = np.concatenate([u0, velocity])
+        labels += VELOCITY_NAMES
+    n = len(u0)
     hessian = np.zeros((n, n))
     for i in range(n):
         step = np.zeros(n)
@@ -152,16 +164,22 @@ def _curvature(observation: Observation, fitted: Material, names: list[str], bes
         hessian[:, i] = (up - down) / (2 * HESSIAN_STEP)
     hessian = 0.5 * (hessian + hessian.T)
     eigenvalues, eigenvectors = np.linalg.eigh(hessian)
-    flat = eigenvalues <= FLAT_DIRECTION * max(abs(eigenvalues[-1]), 1e-300)
+    scale = max(abs(eigenvalues).max(), 1e-300)
+    flat = np.abs(eigenvalues) <= FLAT_DIRECTION * scale
+    warnings = []
+    if (eigenvalues < -FLAT_DIRECTION * scale).any():
+        warnings.append(
+            "the loss still curves downwards at the fitted values: the fit has not "
+            "converged; run more iterations, another optimizer or more restarts"
+        )
     # Gauss-Newton covariance of u; a flat direction has unbounded variance.
     noise = 2.0 * max(best.loss, 1e-30) / observation.positions.size
-    weights = eigenvectors**2  # weights[i, k]: share of parameter i in direction k
-    inverse = np.broadcast_to(
-        np.where(flat, np.inf, 1.0 / np.where(flat, 1.0, eigenvalues)), weights.shape
-    )
-    involved = weights > 1e-12
+    weights = eigenvectors**2  # weights[i, k]: share of coordinate i in direction k
+    usable = ~flat & (eigenvalues > 0)
+    inverse = np.where(usable, 1.0 / np.where(usable, eigenvalues, 1.0), np.inf)
+    involved = weights > 1e-6
     contributions = np.zeros_like(weights)
-    contributions[involved] = weights[involved] * inverse[involved]
+    contributions[involved] = (weights * np.broadcast_to(inverse, weights.shape))[involved]
     variance_u = noise * contributions.sum(axis=1)
     relative_std = {}
     for i, name in enumerate(names):
@@ -169,18 +187,17 @@ def _curvature(observation: Observation, fitted: Material, names: list[str], bes
         relative_std[name] = (
             slope * float(np.sqrt(variance_u[i])) / max(abs(best.values[name]), 1e-300)
         )
-    warnings = []
     for vector in eigenvectors.T[flat]:
-        involved = [names[i] for i in np.argsort(-np.abs(vector)) if abs(vector[i]) > 0.2]
-        if len(involved) == 1:
+        involved_names = [labels[i] for i in np.argsort(-np.abs(vector)) if abs(vector[i]) > 0.2]
+        if len(involved_names) == 1:
             warnings.append(
-                f"the observation does not depend on {involved[0]}: it cannot be identified "
-                "from these data"
+                f"the observation does not depend on {involved_names[0]}: it cannot be "
+                "identified from these data"
             )
         else:
             warnings.append(
                 "the observation does not change when "
-                + " and ".join(involved)
+                + " and ".join(involved_names)
                 + " change together (a flat direction of the loss): they cannot be "
                 "separated, only a combination of them is determined"
             )

@@ -55,13 +55,17 @@ class Observation:
     def __post_init__(self) -> None:
         positions = np.asarray(self.positions, dtype=np.float64)
         steps = np.asarray(self.frame_steps, dtype=np.int64)
-        indices = np.asarray(self.particle_indices, dtype=np.int64)
+        raw_indices = np.asarray(self.particle_indices)
+        indices = raw_indices.astype(np.int64)
+        if raw_indices.size and not np.array_equal(indices, raw_indices):
+            raise ObservationError("particle_indices must be whole numbers")
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "frame_steps", steps)
         object.__setattr__(self, "particle_indices", indices)
-        if positions.ndim != 3 or positions.shape[2] != 3:
+        if positions.ndim != 3 or positions.shape[2] != 3 or positions.shape[1] == 0:
             raise ObservationError(
-                f"positions must have shape (frames, particles, 3), got {positions.shape}"
+                "positions must have shape (frames, particles, 3) with at least one "
+                f"particle, got {positions.shape}"
             )
         if not np.isfinite(positions).all():
             raise ObservationError(
@@ -76,8 +80,8 @@ class Observation:
                 f"need at least {MIN_FRAMES} frames after t = 0 to fit a material, "
                 f"got {(steps > 0).sum()}"
             )
-        if np.any(np.diff(steps) <= 0):
-            raise ObservationError("frame times must be strictly increasing")
+        if np.any(np.diff(steps) <= 0) or steps.min() < 0:
+            raise ObservationError("frame times must be >= 0 and strictly increasing")
         if indices.shape != (positions.shape[1],):
             raise ObservationError(
                 f"particle_indices has shape {indices.shape}, expected ({positions.shape[1]},)"
@@ -120,6 +124,8 @@ def save_observation(path, observation: Observation) -> Path:
     """Write an observation as ``.npz`` (see the module docstring for the keys)."""
     scene = observation.scene
     path = Path(path)
+    if path.suffix != ".npz":  # numpy would add it silently
+        path = path.with_name(path.name + ".npz")
     np.savez(
         path,
         positions=observation.positions,
@@ -166,6 +172,8 @@ def load_observation(path) -> Observation:
         data = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as error:
         raise ObservationError(f"'{path}' is not a NumPy .npz archive: {error}") from error
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ObservationError(f"'{path}' holds a single array, not an .npz observation archive")
     with data:
         missing = [key for key in REQUIRED_KEYS if key not in data.files]
         if missing:
@@ -173,19 +181,22 @@ def load_observation(path) -> Observation:
                 f"'{path}' lacks {missing}; write it with taichi_mpm.sysid.save_observation"
             )
         values = {key: data[key] for key in data.files}
-    scene = Scene(
-        positions=values["initial_positions"],
-        velocities=values["initial_velocities"],
-        particle_volume=float(values["particle_volume"]),
-        density=float(values["density"]),
-        grid_resolution=int(values["grid_resolution"]),
-        domain_size=float(values["domain_size"]),
-        dt=float(values["dt"]),
-        gravity=tuple(float(g) for g in values["gravity"]),
-        walls=Walls(
-            str(values["walls"]), int(values["wall_thickness"]), float(values["wall_friction"])
-        ),
-    )
+    try:
+        scene = Scene(
+            positions=values["initial_positions"],
+            velocities=values["initial_velocities"],
+            particle_volume=float(values["particle_volume"]),
+            density=float(values["density"]),
+            grid_resolution=int(values["grid_resolution"]),
+            domain_size=float(values["domain_size"]),
+            dt=float(values["dt"]),
+            gravity=tuple(float(g) for g in values["gravity"]),
+            walls=Walls(
+                str(values["walls"]), int(values["wall_thickness"]), float(values["wall_friction"])
+            ),
+        )
+    except (TypeError, ValueError) as error:  # SceneError is a ValueError
+        raise ObservationError(f"'{path}' describes an invalid scene: {error}") from error
     return observation_from_times(
         scene, values["positions"], values["times"], values.get("particle_indices")
     )

@@ -26,7 +26,7 @@ class Transform:
         if self.name == "log":
             return float(np.exp(u))
         if self.name == "sigmoid":
-            return self.low + (self.high - self.low) / (1.0 + np.exp(-u))
+            return float(self.low + (self.high - self.low) / (1.0 + np.exp(-u)))
         return float(np.logaddexp(0.0, u))  # softplus
 
     def derivative(self, u: float) -> float:
@@ -34,7 +34,7 @@ class Transform:
             return float(np.exp(u))
         if self.name == "sigmoid":
             s = 1.0 / (1.0 + np.exp(-u))
-            return (self.high - self.low) * s * (1.0 - s)
+            return float((self.high - self.low) * s * (1.0 - s))
         return float(1.0 / (1.0 + np.exp(-u)))
 
     def inverse(self, value: float) -> float:

@@ -79,9 +79,15 @@ def test_particle_indices_default_to_all_particles(tmp_path):
 def test_wrong_positions_shape():
     scene = small_scene()
     positions = fake_positions(scene)
-    with pytest.raises(ObservationError, match=r"shape \(frames, particles, 3\), got \(4, 27, 2\)"):
+    with pytest.raises(
+        ObservationError,
+        match=r"shape \(frames, particles, 3\) with at least one particle, got \(4, 27, 2\)",
+    ):
         Observation(scene, positions[..., :2], [5, 10, 15, 20], np.arange(27))
-    with pytest.raises(ObservationError, match=r"shape \(frames, particles, 3\), got \(4, 81\)"):
+    with pytest.raises(
+        ObservationError,
+        match=r"shape \(frames, particles, 3\) with at least one particle, got \(4, 81\)",
+    ):
         Observation(scene, positions.reshape(4, -1), [5, 10, 15, 20], np.arange(27))
 
 
@@ -165,3 +171,28 @@ def test_particle_indices_out_of_range(tmp_path):
     np.savez(tmp_path / "bad_indices.npz", **data)
     with pytest.raises(ObservationError, match=r"particle_indices must lie in \[0, 27\)"):
         load_observation(tmp_path / "bad_indices.npz")
+
+
+def test_negative_times_fractional_indices_and_empty_subsets_are_refused():
+    scene = small_scene()
+    positions = fake_positions(scene)
+    with pytest.raises(ObservationError, match=">= 0 and strictly increasing"):
+        Observation(scene, positions, [-5, 10, 15, 20], np.arange(27))
+    with pytest.raises(ObservationError, match="whole numbers"):
+        Observation(scene, positions, [5, 10, 15, 20], np.arange(27) + 0.5)
+    with pytest.raises(ObservationError, match="at least one particle"):
+        Observation(scene, positions[:, :0], [5, 10, 15, 20], np.arange(0))
+
+
+def test_a_single_array_file_is_not_an_observation(tmp_path):
+    path = tmp_path / "positions.npy"
+    np.save(path, np.zeros((3, 4, 3)))
+    with pytest.raises(ObservationError, match="single array"):
+        load_observation(path)
+
+
+def test_save_observation_returns_the_path_it_wrote(tmp_path):
+    scene = small_scene()
+    observation = Observation(scene, fake_positions(scene), [5, 10, 15, 20], np.arange(27))
+    written = save_observation(tmp_path / "observed", observation)
+    assert written == tmp_path / "observed.npz" and written.is_file()
