@@ -179,7 +179,7 @@ def _curvature(observation: Observation, fitted: Material, names: list[str], bes
     inverse = np.where(usable, 1.0 / np.where(usable, eigenvalues, 1.0), np.inf)
     involved = weights > 1e-6
     contributions = np.zeros_like(weights)
-    contributions[involved] = (weights * np.broadcast_to(inverse, weights.shape))[involved]
+    contributions[involved] = weights[involved] * np.broadcast_to(inverse, weights.shape)[involved]
     variance_u = noise * contributions.sum(axis=1)
     relative_std = {}
     for i, name in enumerate(names):
