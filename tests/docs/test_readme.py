@@ -16,3 +16,26 @@ def test_readme_python_example_runs():
         [sys.executable, "-c", blocks[0] + check], capture_output=True, text=True, timeout=900
     )
     assert result.returncode == 0, result.stderr[-2000:]
+
+
+def test_readme_sysid_example_runs(tmp_path):
+    """The system-identification example: make the observation, then the python block."""
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
+    example = next(block for block in blocks if "load_observation" in block)
+    script = README.parent / "scripts" / "make_observation.py"
+    subprocess.run(
+        [sys.executable, str(script), "observed.npz", "--material", "vonmises", "--noise", "0.01"],
+        cwd=tmp_path,
+        check=True,
+        capture_output=True,
+        timeout=600,
+    )
+    check = "\nassert abs(result.best.values['yield_stress'] / 2e3 - 1) < 0.1\n"
+    result = subprocess.run(
+        [sys.executable, "-c", example + check],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
