@@ -11,7 +11,8 @@ from click.testing import CliRunner
 from matplotlib.image import imread
 
 from taichi_mpm import runtime
-from taichi_mpm.cli import MATERIALS, frame_steps, main
+from taichi_mpm.cli import main
+from taichi_mpm.cli.demo import MATERIALS, frame_steps
 from taichi_mpm.render import figure_size
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,39 @@
+"""Command line interface: ``taichi-mpm`` (or ``python -m taichi_mpm``).
+
+One module per command: :mod:`.demo`, :mod:`.warmup`, :mod:`.sysid`.
+"""
+
+from __future__ import annotations
+
+import click
+from rich.console import Console
+
+import taichi_mpm as tm
+
+ARCHS = ("cpu", "cuda", "vulkan", "gpu")
+PRECISIONS = ("float32", "float64")
+
+
+def start_taichi(console: Console, arch: str, precision: str) -> str:
+    """Initialise Taichi; warn when it falls back to another backend; returns the backend."""
+    try:
+        info = tm.init(arch=arch, precision=precision)
+    except Exception as error:  # Taichi raises several types for an unavailable backend
+        raise click.ClickException(f"could not start Taichi on arch={arch}: {error}") from error
+    if arch in ("cuda", "vulkan") and info.backend != arch:
+        console.print(f"[yellow]warning:[/] no {arch} backend here; Taichi runs on {info.backend}")
+    return info.backend
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """taichi-mpm: a differentiable 3D MLS-MPM simulator in Taichi.
+
+    `taichi-mpm demo` simulates a spinning cube of one of several materials and saves a
+    picture of its motion; `taichi-mpm sysid` fits material parameters to an observed
+    motion; `taichi-mpm warmup` compiles every kernel once.
+    """
+
+
+# The commands register themselves on ``main`` when imported.
+from taichi_mpm.cli import demo, sysid, warmup  # noqa: E402, F401
