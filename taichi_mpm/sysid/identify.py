@@ -108,6 +108,12 @@ def identify(
     best = min(runs, key=lambda r: r.loss)
     fitted = material.replace(**best.values)
     relative_std, hessian, warnings = _curvature(observation, fitted, names, best)
+    if not best.converged:
+        warnings.insert(
+            0,
+            f"the best fit stopped after {best.iterations} iterations without converging; "
+            "its values may be inaccurate: raise --iterations or use the lbfgs optimizer",
+        )
     warnings += _restart_disagreement(runs, best, names)
     return Identification(best, runs, fitted, relative_std, hessian, warnings)
 
