@@ -13,6 +13,17 @@ import taichi_mpm as tm
 ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 PRECISIONS = ("float32", "float64")
 
+arch_option = click.option(
+    "--arch", type=click.Choice(ARCHS), default="cpu", show_default=True, help="Taichi backend."
+)
+precision_option = click.option(
+    "--precision",
+    type=click.Choice(PRECISIONS),
+    default="float32",
+    show_default=True,
+    help="Floating-point type of the simulation.",
+)
+
 
 def start_taichi(console: Console, arch: str, precision: str) -> str:
     """Initialise Taichi; warn when it falls back to another backend; returns the backend."""

@@ -10,7 +10,7 @@ import numpy as np
 from rich.console import Console
 
 import taichi_mpm as tm
-from taichi_mpm.cli import ARCHS, PRECISIONS, main, start_taichi
+from taichi_mpm.cli import arch_option, main, precision_option, start_taichi
 from taichi_mpm.render import render_frames
 
 #: Most panels a demo picture may have (beyond this the panels become too small to read).
@@ -110,16 +110,8 @@ _DEMO_HELP = (
     show_default=True,
     help="PNG file to write (missing parent folders are created).",
 )
-@click.option(
-    "--arch", type=click.Choice(ARCHS), default="cpu", show_default=True, help="Taichi backend."
-)
-@click.option(
-    "--precision",
-    type=click.Choice(PRECISIONS),
-    default="float32",
-    show_default=True,
-    help="Floating-point type of the simulation.",
-)
+@arch_option
+@precision_option
 def demo(material: str, steps: int, frames: int, out: Path, arch: str, precision: str) -> None:
     console = Console(highlight=False)
     out = _check_output(out)

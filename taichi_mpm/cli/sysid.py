@@ -11,7 +11,7 @@ import numpy as np
 from rich.console import Console
 
 import taichi_mpm as tm
-from taichi_mpm.cli import ARCHS, PRECISIONS, main, start_taichi
+from taichi_mpm.cli import arch_option, main, precision_option, start_taichi
 from taichi_mpm.sysid.families import (
     FAMILIES,
     family_parameters,
@@ -139,16 +139,8 @@ def _json_ready(value):
     show_default=True,
     help="Folder for fit.json and comparison.png (created if missing).",
 )
-@click.option(
-    "--arch", type=click.Choice(ARCHS), default="cpu", show_default=True, help="Taichi backend."
-)
-@click.option(
-    "--precision",
-    type=click.Choice(PRECISIONS),
-    default="float32",
-    show_default=True,
-    help="Floating-point type of the simulation.",
-)
+@arch_option
+@precision_option
 def sysid(
     observed: Path,
     family: str,

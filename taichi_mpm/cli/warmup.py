@@ -6,13 +6,11 @@ import click
 from rich.console import Console
 
 import taichi_mpm as tm
-from taichi_mpm.cli import ARCHS, PRECISIONS, main, start_taichi
+from taichi_mpm.cli import PRECISIONS, arch_option, main, start_taichi
 
 
 @main.command()
-@click.option(
-    "--arch", type=click.Choice(ARCHS), default="cpu", show_default=True, help="Taichi backend."
-)
+@arch_option
 @click.option(
     "--precision",
     type=click.Choice((*PRECISIONS, "both")),
