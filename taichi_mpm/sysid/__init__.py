@@ -1,6 +1,6 @@
 """System identification: material parameters from observed motion, with taichi_mpm alone."""
 
-from taichi_mpm.sysid.fit import FitError, FitResult, fit
+from taichi_mpm.sysid.fit import FitError, FitResult, FitSettings, fit
 from taichi_mpm.sysid.identify import Identification, identify
 from taichi_mpm.sysid.observation import (
     Observation,
@@ -13,6 +13,7 @@ from taichi_mpm.sysid.observation import (
 __all__ = [
     "FitError",
     "FitResult",
+    "FitSettings",
     "Identification",
     "Observation",
     "ObservationError",

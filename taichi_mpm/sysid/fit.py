@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -92,19 +92,57 @@ class Objective:
         return loss, grad_u
 
 
+@dataclass(frozen=True)
+class FitSettings:
+    """How :func:`fit` optimizes; checked on construction.
+
+    Parameters
+    ----------
+    optimizer : {"adam", "lbfgs"}
+        Adam with ``learning_rate`` in unconstrained coordinates, or L-BFGS with a
+        backtracking line search whose first step moves by ``learning_rate``.
+    iterations : int
+        Most optimizer steps.
+    learning_rate : float
+        Step size in unconstrained coordinates (0.05 = 5% of E or of the yield stress).
+    tolerance, patience : float, int
+        A plateau is a best loss that improved by less than ``tolerance`` (relative) over
+        ``patience`` steps: L-BFGS stops there, Adam cuts its step and stops at the
+        fourth plateau.
+    fit_velocity : bool
+        Also fit the initial linear and angular velocity of the body (a rigid motion),
+        starting from ``initial_velocity`` (default: at rest).
+    checkpoint_every : int, optional
+        Passed to the :class:`~taichi_mpm.Simulator`.
+    """
+
+    optimizer: str = "adam"
+    iterations: int = 200
+    learning_rate: float = 0.05
+    tolerance: float = 1e-4
+    patience: int = 10
+    fit_velocity: bool = False
+    initial_velocity: tuple[Sequence[float], Sequence[float]] | None = None
+    checkpoint_every: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.optimizer not in OPTIMIZERS:
+            raise FitError(f"optimizer={self.optimizer!r} is unknown; use one of {OPTIMIZERS}")
+        if self.iterations < 1 or self.patience < 1:
+            raise FitError(
+                f"iterations={self.iterations} and patience={self.patience} must be >= 1"
+            )
+        if not self.learning_rate > 0:
+            raise FitError(f"learning_rate={self.learning_rate} must be > 0")
+
+
 def fit(
     observation: Observation,
     material: Material,
     names: Sequence[str] | None = None,
-    optimizer: str = "adam",
-    iterations: int = 200,
-    learning_rate: float = 0.05,
-    tolerance: float = 1e-4,
-    patience: int = 10,
-    fit_velocity: bool = False,
-    initial_velocity: tuple[Sequence[float], Sequence[float]] | None = None,
-    checkpoint_every: int | None = None,
+    settings: FitSettings | None = None,
     callback: Callable[[int, float, dict[str, float]], None] | None = None,
+    **options,
 ) -> FitResult:
     """Fit ``names`` (default: all parameters of ``material``) to ``observation``.
 
@@ -116,31 +154,20 @@ def fit(
         The material family with initial guesses for its parameters.
     names : sequence of str, optional
         Parameters to fit; the others stay at their values in ``material``.
-    optimizer : {"adam", "lbfgs"}
-        Adam with ``learning_rate`` in unconstrained coordinates, or L-BFGS with a
-        backtracking line search.
-    iterations : int
-        Most optimizer steps.
-    tolerance, patience : float, int
-        Stop when the best loss improved by less than ``tolerance`` (relative) over the
-        last ``patience`` steps.
-    fit_velocity : bool
-        Also fit the initial linear and angular velocity of the body (a rigid motion),
-        starting from ``initial_velocity`` (default: zero).
+    settings : FitSettings, optional
+        The optimizer and its stopping rule; keyword ``options`` (``optimizer="lbfgs"``,
+        ``learning_rate=0.5``, ...) build or override it.
     callback : callable, optional
         Called as ``callback(iteration, loss, values)`` after every step.
     """
+    settings = resolve_settings(settings, options)
     available = material.parameters()
     names = list(available if names is None else names)
     unknown = [name for name in names if name not in available]
     if unknown:
         raise FitError(f"cannot fit {unknown}: this material has parameters {sorted(available)}")
-    if not names and not fit_velocity:
+    if not names and not settings.fit_velocity:
         raise FitError("nothing to fit: give parameter names or fit_velocity=True")
-    if optimizer not in OPTIMIZERS:
-        raise FitError(f"optimizer={optimizer!r} is unknown; use one of {OPTIMIZERS}")
-    if iterations < 1 or learning_rate <= 0 or patience < 1:
-        raise FitError("iterations and patience must be >= 1 and learning_rate > 0")
     for name in names:
         transform = parameters.TRANSFORMS[name]
         if not transform.low < available[name] < transform.high:
@@ -149,13 +176,32 @@ def fit(
                 f"({transform.low}, {transform.high}); start from a value inside it "
                 f"(for example {name}=1e-3) or leave {name} out of the fitted names"
             )
-    objective = Objective(observation, material, names, fit_velocity, checkpoint_every)
+    objective = Objective(
+        observation, material, names, settings.fit_velocity, settings.checkpoint_every
+    )
     u = parameters.to_unconstrained({name: available[name] for name in names})
-    if fit_velocity:
-        linear, angular = initial_velocity if initial_velocity is not None else ((0,) * 3,) * 2
-        u = np.concatenate([u, np.asarray(linear, float), np.asarray(angular, float)])
-    step = _adam if optimizer == "adam" else _lbfgs
-    return step(objective, u, iterations, learning_rate, tolerance, patience, callback)
+    if settings.fit_velocity:
+        start = settings.initial_velocity or ((0.0,) * 3, (0.0,) * 3)
+        u = np.concatenate([u, np.asarray(start[0], float), np.asarray(start[1], float)])
+    step = _adam if settings.optimizer == "adam" else _lbfgs
+    return step(
+        objective,
+        u,
+        settings.iterations,
+        settings.learning_rate,
+        settings.tolerance,
+        settings.patience,
+        callback,
+    )
+
+
+def resolve_settings(settings: FitSettings | None, options: dict) -> FitSettings:
+    """``settings`` with keyword overrides; unknown keywords name the valid ones."""
+    valid = {f.name for f in fields(FitSettings)}
+    unknown = sorted(set(options) - valid)
+    if unknown:
+        raise FitError(f"unknown fit option(s) {unknown}; valid: {sorted(valid)}")
+    return replace(settings or FitSettings(), **options)
 
 
 class _Tracker:

@@ -21,7 +21,7 @@ import numpy as np
 
 from taichi_mpm.materials import Material
 from taichi_mpm.sysid import parameters
-from taichi_mpm.sysid.fit import FitError, FitResult, Objective, fit
+from taichi_mpm.sysid.fit import FitError, FitResult, FitSettings, Objective, fit, resolve_settings
 from taichi_mpm.sysid.observation import Observation
 
 RELATIVE_STD_LIMIT = 0.05  # a parameter known worse than 5% is not identified
@@ -66,25 +66,22 @@ def identify(
     observation: Observation,
     material: Material,
     names: Sequence[str] | None = None,
-    optimizer: str = "adam",
     restarts: int = 1,
-    iterations: int = 200,
-    learning_rate: float = 0.05,
-    tolerance: float = 1e-4,
-    patience: int = 10,
-    fit_velocity: bool = False,
-    initial_velocity=None,
     seed: int = 0,
+    settings: FitSettings | None = None,
     callback: Callable[[int, int, float, dict[str, float]], None] | None = None,
+    **options,
 ) -> Identification:
     """Fit from ``restarts`` initial guesses and report what the data determine.
 
     The first run starts from ``material``'s values; further runs start from guesses
     spread by up to a factor 3 around them (log-uniform, reproducible with ``seed``).
-    Other parameters are those of :func:`~taichi_mpm.sysid.fit`.
+    ``settings`` and keyword ``options`` are those of :func:`~taichi_mpm.sysid.fit`;
+    ``callback(run, iteration, loss, values)`` follows every run.
     """
     if restarts < 1:
         raise FitError(f"restarts={restarts} must be >= 1")
+    settings = resolve_settings(settings, options)
     names = list(material.parameters() if names is None else names)
     rng = np.random.default_rng(seed)
     runs = []
@@ -95,13 +92,7 @@ def identify(
                 observation,
                 start,
                 names,
-                optimizer,
-                iterations,
-                learning_rate,
-                tolerance,
-                patience,
-                fit_velocity,
-                initial_velocity,
+                settings,
                 callback=None if callback is None else _for_run(callback, run),
             )
         )
