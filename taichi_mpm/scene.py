@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -130,8 +131,6 @@ class Scene:
 
 
 def _replace(scene: Scene, **changes) -> Scene:
-    import dataclasses
-
     return dataclasses.replace(scene, **changes)
 
 
