@@ -63,7 +63,8 @@ class Simulator:
     material : Material
         Constitutive law; change it between runs with :attr:`material`.
     checkpoint_every : int, optional
-        Steps per recorded segment. Default: as many as fit in 32 MiB.
+        Steps per recorded segment. Default: as many as fit in 32 MiB, or more where
+        that lowers the total memory (checkpoints plus one segment).
         ``checkpoint_every=scene.steps`` records the whole trajectory in the forward pass,
         so the backward pass re-runs nothing.
     parallel : bool, optional
