@@ -26,6 +26,7 @@ from taichi_mpm.scene import (
     cube,
     paper_scene,
     rigid_velocity,
+    rigid_velocity_fit,
     rigid_velocity_gradient,
     sphere,
 )
@@ -54,6 +55,7 @@ __all__ = [
     "init",
     "paper_scene",
     "rigid_velocity",
+    "rigid_velocity_fit",
     "rigid_velocity_gradient",
     "sphere",
     "warm_up",

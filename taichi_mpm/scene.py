@@ -178,6 +178,19 @@ def rigid_velocity_gradient(positions: np.ndarray, velocity_grad: np.ndarray):
     return velocity_grad.sum(axis=0), np.cross(arm, velocity_grad).sum(axis=0)
 
 
+def rigid_velocity_fit(positions: np.ndarray, velocities: np.ndarray):
+    """Least-squares (linear, angular) with velocities ~ :func:`rigid_velocity`."""
+    arm = np.asarray(positions) - np.asarray(positions).mean(axis=0)
+    linear = np.asarray(velocities).mean(axis=0)
+    # angular x arm = -[arm]_x angular: stack the skew matrices of every arm
+    skew = np.zeros((len(arm), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2] = arm[:, 2], -arm[:, 1]
+    skew[:, 1, 0], skew[:, 1, 2] = -arm[:, 2], arm[:, 0]
+    skew[:, 2, 0], skew[:, 2, 1] = arm[:, 1], -arm[:, 0]
+    angular = np.linalg.lstsq(skew.reshape(-1, 3), (velocities - linear).ravel(), rcond=None)[0]
+    return linear, angular
+
+
 # --------------------------------------------------------------------------- presets
 
 PAPER_LINEAR_VELOCITY = (1.0, -0.5, -0.75)

@@ -41,19 +41,6 @@ def _parse_guesses(ctx, param, values) -> dict[str, float]:
     return guesses
 
 
-def _rigid_motion(positions: np.ndarray, velocities: np.ndarray):
-    """Least-squares (linear, angular) with velocities ~ linear + angular x (x - centroid)."""
-    arm = positions - positions.mean(axis=0)
-    linear = velocities.mean(axis=0)
-    # angular x r = -r x angular = -[r]_x angular
-    skew = np.zeros((len(arm), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2] = arm[:, 2], -arm[:, 1]
-    skew[:, 1, 0], skew[:, 1, 2] = -arm[:, 2], arm[:, 0]
-    skew[:, 2, 0], skew[:, 2, 1] = arm[:, 1], -arm[:, 0]
-    angular = np.linalg.lstsq(skew.reshape(-1, 3), (velocities - linear).ravel(), rcond=None)[0]
-    return linear, angular
-
-
 def _json_ready(value):
     """Numbers, arrays and containers as JSON values; NaN and inf become null."""
     if isinstance(value, dict):
@@ -185,8 +172,7 @@ def sysid(
     values = material.parameters()
 
     def fittable(name: str) -> bool:
-        transform = TRANSFORMS[name]
-        return transform.low < values[name] < transform.high
+        return TRANSFORMS[name].contains(values[name])
 
     if names:
         names = list(dict.fromkeys(names))
@@ -219,7 +205,7 @@ def sysid(
     backend = start_taichi(console, arch, precision)
     velocity = None
     if fit_velocity:
-        velocity = _rigid_motion(observation.scene.positions, observation.scene.velocities)
+        velocity = tm.rigid_velocity_fit(observation.scene.positions, observation.scene.velocities)
     console.print(
         f"Fitting [bold]{', '.join(names)}[/] of {family} to {observation.positions.shape[1]} "
         f"particles x {len(observation.frame_steps)} frames ({observation.scene.steps} steps, "

@@ -170,7 +170,7 @@ def fit(
         raise FitError("nothing to fit: give parameter names or fit_velocity=True")
     for name in names:
         transform = parameters.TRANSFORMS[name]
-        if not transform.low < available[name] < transform.high:
+        if not transform.contains(available[name]):
             raise FitError(
                 f"{name}={available[name]} is on the edge of its range "
                 f"({transform.low}, {transform.high}); start from a value inside it "

@@ -184,8 +184,10 @@ def _curvature(observation: Observation, fitted: Material, names: list[str], bes
         relative_std[name] = (
             slope * float(np.sqrt(variance_u[i])) / max(abs(best.values[name]), 1e-300)
         )
+    flagged: set[str] = set()  # parameters already named by a flat-direction warning
     for vector in eigenvectors.T[flat]:
         involved_names = [labels[i] for i in np.argsort(-np.abs(vector)) if abs(vector[i]) > 0.2]
+        flagged.update(involved_names)
         if len(involved_names) == 1:
             warnings.append(
                 f"the observation does not depend on {involved_names[0]}: it cannot be "
@@ -198,7 +200,6 @@ def _curvature(observation: Observation, fitted: Material, names: list[str], bes
                 + " change together (a flat direction of the loss): they cannot be "
                 "separated, only a combination of them is determined"
             )
-    flagged = {name for name in names if any(name in text for text in warnings)}
     for name, std in relative_std.items():
         if name not in flagged and (not np.isfinite(std) or std > RELATIVE_STD_LIMIT):
             warnings.append(

@@ -37,8 +37,12 @@ class Transform:
             return float((self.high - self.low) * s * (1.0 - s))
         return float(1.0 / (1.0 + np.exp(-u)))
 
+    def contains(self, value: float) -> bool:
+        """Whether value lies strictly inside the range (where inverse exists)."""
+        return self.low < value < self.high
+
     def inverse(self, value: float) -> float:
-        if not self.low < value < self.high:
+        if not self.contains(value):
             raise ValueError(f"{value} is outside ({self.low}, {self.high})")
         if self.name == "log":
             return float(np.log(value))
