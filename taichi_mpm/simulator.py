@@ -90,6 +90,8 @@ class Simulator:
         self.num_segments = -(-scene.steps // self.segment)
         self._allocate()
         self._frames: np.ndarray | None = None
+        #: Full states kept by the last forward(state_frames=...): x, v, C, F (trial).
+        self.states: dict[str, np.ndarray] = {}
         self.material = material
 
     # ------------------------------------------------------------------ set-up
@@ -361,21 +363,34 @@ class Simulator:
 
     # ------------------------------------------------------------------ public API
 
-    def forward(self, frames: Iterable[int] | None = None) -> np.ndarray:
+    def forward(
+        self, frames: Iterable[int] | None = None, state_frames: Iterable[int] | None = None
+    ) -> np.ndarray:
         """Run all steps from the scene's initial state.
 
         Parameters
         ----------
         frames : iterable of int, optional
             Steps (0..scene.steps) whose particle positions are returned; default every step.
+        state_frames : iterable of int, optional
+            Steps whose full particle state (x, v, C and the trial F) is kept in
+            :attr:`states` (for example to restart or teacher-force another simulation).
 
         Returns
         -------
         (len(frames), N, 3) float64 array of positions.
         """
         frames = self._check_frames(frames)
+        wanted_states = self._check_frames([] if state_frames is None else state_frames, True)
         self._load_initial_state()
-        positions = np.empty((len(frames), self.scene.num_particles, 3))
+        N = self.scene.num_particles
+        positions = np.empty((len(frames), N, 3))
+        self.states = {
+            "x": np.empty((len(wanted_states), N, 3)),
+            "v": np.empty((len(wanted_states), N, 3)),
+            "C": np.empty((len(wanted_states), N, 3, 3)),
+            "F": np.empty((len(wanted_states), N, 3, 3)),
+        }
         for segment in range(self.num_segments):
             start, steps = segment * self.segment, self._segment_steps(segment)
             if segment > 0:
@@ -386,6 +401,10 @@ class Simulator:
             if len(wanted):
                 recorded = self.x.to_numpy()
                 positions[wanted] = recorded[frames[wanted] - start]
+            kept = np.nonzero((wanted_states >= start) & (wanted_states <= start + steps))[0]
+            if len(kept):
+                for name, array in zip(self.states, self._state, strict=True):
+                    self.states[name][kept] = array.to_numpy()[wanted_states[kept] - start]
         # The last segment stays recorded: backward starts there without re-running it.
         self._recorded_segment = self.num_segments - 1
         self._frames = frames
@@ -460,11 +479,13 @@ class Simulator:
             velocities=self._carry[1].to_numpy()[0].astype(np.float64),
         )
 
-    def _check_frames(self, frames: Iterable[int] | None) -> np.ndarray:
+    def _check_frames(self, frames: Iterable[int] | None, may_be_empty: bool = False) -> np.ndarray:
         steps = self.scene.steps
         if frames is None:
             return np.arange(steps + 1)
         frames = np.asarray(list(frames), dtype=np.int64)
+        if may_be_empty and frames.size == 0:
+            return frames
         if frames.ndim != 1 or len(frames) == 0:
             raise ValueError("frames must be a non-empty sequence of step indices")
         if frames.min() < 0 or frames.max() > steps:

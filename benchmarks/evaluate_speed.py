@@ -1,0 +1,110 @@
+"""Time of one candidate evaluation of a constitutive-law task (paper scene, float32, CPU).
+
+Each task runs in a fresh process (so its peak memory is its own): the ground-truth law
+started 2x off is fitted for ``--epochs`` epochs (one epoch: the 1000-step teacher-forced
+forward pass and its segment-wise backward, with the torch law in the loop). Printed: the
+whole evaluation, the wall time per epoch, the peak resident memory, and the ratio to the
+per-epoch times the issue reports for the original authors' Warp + torch code on this
+machine (elastic 9-14 s, plasticine 17-23 s, about 2 GB). Usage::
+
+    python benchmarks/evaluate_speed.py [--epochs 30] [--tasks elastic plasticine] [--profile]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+START = {  # ground-truth law file and its parameters started 2x off
+    "elastic": ("neo_hookean.py", {"log_youngs_modulus": 13.0 + math.log(2.0)}),
+    "plasticine": ("von_mises.py", {"log_yield_stress": math.log(6e4)}),
+    "granular": ("drucker_prager.py", {"log_friction_angle": math.log(50.0)}),
+    "fluid": ("fluid.py", {"fluidity": 0.5}),
+    "imaginary": ("mixture.py", {"log_yield_stress": math.log(6e4)}),
+}
+AUTHORS_SECONDS_PER_EPOCH = {"elastic": (9.0, 14.0), "plasticine": (17.0, 23.0)}
+
+
+def law_code(task: str) -> str:
+    file, start = START[task]
+    code = (ROOT / "examples" / "laws" / file).read_text()
+    for argument, value in start.items():
+        code = re.sub(rf"({argument}: float = )[^,)]+", rf"\g<1>{value!r}", code)
+    return code
+
+
+def run_one(task: str, epochs: int, profile: bool) -> dict:
+    """Evaluate in this process (called in a child); returns the measurements."""
+    import torch
+
+    from sga_agent.registry import load_task
+    from sga_agent.task import EvaluationSettings
+
+    torch.set_num_threads(1)
+    evaluator = load_task(task)
+    evaluator.evaluate(law_code(task), EvaluationSettings(epochs=0))  # compile, ground truth
+    started = time.perf_counter()
+    if profile:
+        import cProfile
+        import pstats
+
+        profiler = cProfile.Profile()
+        result = profiler.runcall(
+            evaluator.evaluate, law_code(task), EvaluationSettings(epochs=epochs)
+        )
+        pstats.Stats(profiler, stream=sys.stderr).sort_stats("tottime").print_stats(15)
+    else:
+        result = evaluator.evaluate(law_code(task), EvaluationSettings(epochs=epochs))
+    seconds = time.perf_counter() - started
+    return {
+        "task": task,
+        "valid": result.valid,
+        "seconds": seconds,
+        "epochs": epochs,
+        "first_loss": result.curves["loss"][0] if result.valid else math.nan,
+        # the last entry is the forward-only scoring of the final parameters
+        "epoch_seconds": result.extras["epoch_seconds"][:-1],
+        "loss": result.loss,
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--epochs", type=int, default=30)
+    parser.add_argument("--tasks", nargs="+", default=["elastic", "plasticine"], choices=START)
+    parser.add_argument("--profile", action="store_true", help="cProfile of the evaluation")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(run_one(args.child, args.epochs, args.profile)))
+        return
+    print(f"{'task':<11} {'epochs':>6} {'total s':>8} {'s/epoch':>8} {'peak MB':>8} "
+          f"{'loss start -> end':>22} {'authors s/epoch':>16} {'speed-up':>9}")  # fmt: skip
+    for task in args.tasks:
+        command = [sys.executable, __file__, "--child", task, "--epochs", str(args.epochs)]
+        if args.profile:
+            command.append("--profile")
+        out = subprocess.run(command, capture_output=True, text=True, check=True)
+        if args.profile:
+            print(out.stderr)
+        row = json.loads(out.stdout.strip().splitlines()[-1])
+        per_epoch = sum(row["epoch_seconds"]) / max(len(row["epoch_seconds"]), 1)
+        low, high = AUTHORS_SECONDS_PER_EPOCH.get(task, (math.nan, math.nan))
+        authors = f"{low:.0f}-{high:.0f}" if math.isfinite(low) else "n/a"
+        speedup = f"{low / per_epoch:.1f}-{high / per_epoch:.1f}x" if math.isfinite(low) else ""
+        print(f"{task:<11} {row['epochs']:>6} {row['seconds']:8.1f} {per_epoch:8.2f} "
+              f"{row['peak_mb']:8.0f} {row['first_loss']:10.2e} -> {row['loss']:9.2e} "
+              f"{authors:>16} {speedup:>9}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

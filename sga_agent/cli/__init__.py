@@ -1,0 +1,21 @@
+"""Command line interface: ``sga-agent``.
+
+One module per command: :mod:`.tasks`, :mod:`.evaluate`.
+"""
+
+from __future__ import annotations
+
+import click
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """sga-agent: LLM-driven bilevel search for physics code and molecules.
+
+    `sga-agent tasks` lists the registered tasks; `sga-agent evaluate` scores one solution
+    file in the sandbox, exactly as the search does.
+    """
+
+
+# The commands register themselves on ``main`` when imported.
+from sga_agent.cli import evaluate, tasks  # noqa: E402, F401

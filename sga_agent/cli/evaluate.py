@@ -1,0 +1,127 @@
+"""``sga-agent evaluate``: score one solution file in the sandbox, as the search does."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from sga_agent import registry
+from sga_agent.cli import main
+from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
+from sga_agent.task import Evaluation, EvaluationSettings
+
+_FENCED_PYTHON = re.compile(r"```python[^\n]*\n(.*?)```", re.DOTALL)
+_DEFAULTS = SandboxLimits()
+
+
+def extract_solution(text: str) -> str:
+    """The last ```python fenced block of ``text`` (a model's answer), else the whole text."""
+    blocks = _FENCED_PYTHON.findall(text)
+    return blocks[-1] if blocks else text
+
+
+def _check_task(ctx: click.Context, param: click.Parameter, name: str) -> str:
+    """Reject an unregistered name early, with the registry's "did you mean" message."""
+    if ":" in name or name in registry.task_entry_points():
+        return name
+    try:
+        registry.load_task(name)  # raises UnknownTaskError, nothing is loaded
+    except registry.UnknownTaskError as error:
+        raise click.BadParameter(str(error), ctx=ctx, param=param) from error
+    return name
+
+
+@main.command()
+@click.option(
+    "--task",
+    "task_name",
+    required=True,
+    metavar="NAME",
+    callback=_check_task,
+    help="A registered task (see `sga-agent tasks`), or module:callable, a factory of a task "
+    "under development, imported from the current directory.",
+)
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--epochs",
+    type=click.IntRange(min=0),
+    help="Steps of the inner optimization [default: the task's].",
+)
+@click.option(
+    "--lr",
+    "learning_rate",
+    type=click.FloatRange(min=0, min_open=True),
+    help="Learning rate of the inner optimization [default: the task's].",
+)
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print only the evaluation as JSON (with the traceback of a failure, if any).",
+)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=_DEFAULTS.timeout_s,
+    show_default=True,
+    help="Wall-clock limit of the evaluation, in seconds.",
+)
+@click.option(
+    "--memory-mb",
+    type=click.IntRange(min=64),
+    default=_DEFAULTS.memory_mb,
+    show_default=True,
+    help="Limit on the worker's memory in MiB (Taichi alone takes about 1.2 GiB of it).",
+)
+def evaluate(
+    task_name: str,
+    file: Path,
+    epochs: int | None,
+    learning_rate: float | None,
+    as_json: bool,
+    timeout_s: float,
+    memory_mb: int,
+) -> None:
+    """Score the solution in FILE for a task, in the sandbox.
+
+    The evaluation runs exactly as in the search. FILE is a solution (a law's .py file, a
+    molecule block) or a model's answer, whose last ```python block is then used. Prints the
+    fitted parameters, the loss and the feedback; an invalid solution prints its reason to
+    stderr and exits with status 1.
+    """
+    try:
+        text = file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise click.BadParameter(f"cannot read '{file}': {error}", param_hint="'FILE'") from error
+    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
+    settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate)
+    extra_path = [Path.cwd()] if ":" in task_name else []
+    evaluation = evaluate_in_sandbox(
+        task_name, extract_solution(text), settings, limits, extra_python_path=extra_path
+    )
+    if as_json:
+        click.echo(evaluation.to_json())
+    elif evaluation.valid:
+        _show(evaluation)
+    if not evaluation.valid:
+        click.echo(f"invalid: {evaluation.reason}", err=True)
+        sys.exit(1)
+
+
+def _show(evaluation: Evaluation) -> None:
+    console = Console(highlight=False)
+    if evaluation.parameters:
+        table = Table("parameter", "value", title="fitted parameters")
+        for name, value in evaluation.parameters.items():
+            table.add_row(name, f"{value:.6g}")
+        console.print(table)
+    console.print(f"loss: {evaluation.loss:.6g}   ({evaluation.seconds:.1f} s)")
+    console.print(Text("feedback:", style="bold"))
+    console.print(Text(evaluation.feedback))

@@ -1,0 +1,63 @@
+"""Finding tasks: the ``sga_agent.tasks`` entry-point group.
+
+Built-in tasks register in this project's ``pyproject.toml`` exactly as a third-party plugin
+would in its own::
+
+    [project.entry-points."sga_agent.tasks"]
+    my-task = "my_package.tasks:MyTask"
+
+The entry point names a zero-argument callable (usually the task class) that returns an object
+satisfying :class:`sga_agent.task.Task`. Loading is lazy: listing names imports nothing.
+"""
+
+from __future__ import annotations
+
+import difflib
+from importlib.metadata import EntryPoint, entry_points
+
+from sga_agent.task import Task
+
+GROUP = "sga_agent.tasks"
+
+
+class UnknownTaskError(LookupError):
+    """No registered task has the requested name."""
+
+
+def task_entry_points() -> dict[str, EntryPoint]:
+    """Registered tasks by name (nothing imported)."""
+    return {point.name: point for point in entry_points(group=GROUP)}
+
+
+def task_names() -> list[str]:
+    """Sorted names of the registered tasks."""
+    return sorted(task_entry_points())
+
+
+def load_task(name: str) -> Task:
+    """Instantiate the task registered as ``name``.
+
+    Raises
+    ------
+    UnknownTaskError
+        No such task; the message lists the registered ones and the closest match.
+    TypeError
+        The entry point does not produce a :class:`Task`.
+    """
+    points = task_entry_points()
+    if name not in points:
+        close = difflib.get_close_matches(name, points, n=1)
+        hint = f" Did you mean {close[0]!r}?" if close else ""
+        known = ", ".join(sorted(points)) or "none"
+        raise UnknownTaskError(
+            f"no task named {name!r} is registered (known: {known}).{hint} "
+            f"Tasks register through the {GROUP!r} entry-point group; see `sga-agent tasks`."
+        )
+    task = points[name].load()()
+    if not isinstance(task, Task):
+        raise TypeError(
+            f"entry point {name!r} ({points[name].value}) returned {type(task).__name__}, which "
+            "does not satisfy sga_agent.task.Task (name, description, kind, seed_solution, "
+            "prompt_parts, evaluate)"
+        )
+    return task

@@ -1,0 +1,138 @@
+"""The contract between the search and a scientific task.
+
+A task plugin (a constitutive-law search, a molecule design, a third party's problem) is an
+object satisfying :class:`Task`. The search only ever sees solutions as text (the code block a
+proposer wrote) and :class:`Evaluation` records; a task's ``evaluate`` runs inside a sandboxed
+worker process, never in the search process. This module has no dependency beyond the standard
+library so that task packages can import it cheaply.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal, Protocol, runtime_checkable
+
+TaskKind = Literal["equation", "entity"]
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """How hard a task's inner optimization works on one candidate.
+
+    Parameters
+    ----------
+    epochs : int, optional
+        Inner-optimization steps; ``None`` uses the task's default.
+    learning_rate : float, optional
+        Step size of the inner optimizer; ``None`` uses the task's default.
+    seed : int
+        Seed for any randomness of the evaluation.
+    options : dict
+        Task-specific settings (each task documents its own keys).
+    """
+
+    epochs: int | None = None
+    learning_rate: float | None = None
+    seed: int = 0
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.epochs is not None and (not isinstance(self.epochs, int) or self.epochs < 0):
+            raise ValueError(f"epochs must be a non-negative integer or None, got {self.epochs!r}")
+        if self.learning_rate is not None and not self.learning_rate > 0:
+            raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+
+
+@dataclass
+class Evaluation:
+    """Outcome of evaluating one candidate solution.
+
+    ``valid`` is False when the candidate could not be scored (it does not load, has the wrong
+    signature, went unstable...); ``reason`` then says why in one line and ``loss`` is inf.
+    ``feedback`` is the text shown to the model in later prompts. ``parameters`` are the fitted
+    values of the best epoch, ``curves`` maps a name ("loss", a parameter name) to its values
+    over the inner optimization, ``extras`` holds any further JSON-serialisable record.
+    """
+
+    valid: bool
+    loss: float
+    feedback: str
+    reason: str = ""
+    parameters: dict[str, float] = field(default_factory=dict)
+    curves: dict[str, list[float]] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @classmethod
+    def invalid(cls, reason: str, feedback: str | None = None, **fields: Any) -> Evaluation:
+        """An unscored candidate: infinite loss, the reason doubling as feedback by default."""
+        return cls(False, math.inf, feedback if feedback is not None else reason, reason, **fields)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (an infinite loss becomes the string "inf")."""
+        data = asdict(self)
+        data["loss"] = _encode_float(self.loss)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Evaluation:
+        """Inverse of :meth:`to_dict`."""
+        data = dict(data)
+        data["loss"] = float(data["loss"])
+        return cls(**data)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+
+def _encode_float(value: float) -> float | str:
+    return value if math.isfinite(value) else str(value)
+
+
+@dataclass(frozen=True)
+class PromptParts:
+    """The task-specific text the prompt templates are filled with.
+
+    Parameters
+    ----------
+    role : str
+        Who the model is asked to be (the system prompt's expertise sentence).
+    context : str
+        What is being searched for and how a solution is scored.
+    template : str
+        The code skeleton every proposal must follow.
+    requirements : str
+        Task-specific rules for the code (shapes, units, allowed operations, tips).
+    """
+
+    role: str
+    context: str
+    template: str
+    requirements: str
+
+
+@runtime_checkable
+class Task(Protocol):
+    """A scientific problem the search can work on.
+
+    ``kind`` is ``"equation"`` (code with continuous parameters fitted by the inner loop) or
+    ``"entity"`` (a structure, such as a molecule, whose continuous part is optimized).
+    """
+
+    name: str
+    description: str
+    kind: TaskKind
+
+    def seed_solution(self) -> str:
+        """The bootstrap solution (code text) the search starts from."""
+        ...
+
+    def prompt_parts(self) -> PromptParts:
+        """Task-specific prompt text."""
+        ...
+
+    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
+        """Run the inner optimization on ``solution``; never raises for a bad candidate."""
+        ...

@@ -1,0 +1,101 @@
+"""Scoring one proposed law: load it, fit it through the simulator, write the feedback.
+
+Imports Taichi and torch, so it is imported only where a candidate is evaluated (the sandbox
+worker, ``sga-agent evaluate``, tests), never when the search lists tasks.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import torch
+
+import taichi_mpm as tm
+from bridges import laws as torch_laws
+from bridges.rollout import LawError, Rollout
+from bridges.step import torch_dtype
+from sga_agent.task import Evaluation, EvaluationSettings
+from taichi_mpm import runtime
+from tasks.constitutive import feedback
+from tasks.constitutive.ground_truth import Trajectory, load_or_generate
+from tasks.constitutive.inner import InnerSettings, NoFiniteEpoch, optimize
+from tasks.constitutive.law_code import LawCodeError, describe_error, load_law
+from tasks.constitutive.specs import KNOWN_ELASTIC, ConstitutiveSpec
+
+
+def ensure_runtime(precision: str) -> None:
+    """Start Taichi on the CPU unless it runs already (one precision per process)."""
+    try:
+        runtime.current()
+    except runtime.RuntimeNotInitialized:
+        tm.init(arch="cpu", precision=precision)
+
+
+def ground_truth(spec: ConstitutiveSpec, steps: int | None = None) -> Trajectory:
+    """The task's observed trajectory (cached)."""
+    scene = tm.paper_scene(steps=steps or spec.steps)
+    return load_or_generate(spec.name, spec.material(), scene, spec.reset_every)
+
+
+def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
+    """The fixed elastic law of the plastic tasks, frozen."""
+    law = torch_laws.StVKHencky(E=KNOWN_ELASTIC.E, nu=KNOWN_ELASTIC.nu, dtype=dtype)
+    return law.requires_grad_(False)
+
+
+def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) -> Evaluation:
+    """Fit the law in ``code`` to the task's observation; invalid results carry a reason.
+
+    ``settings.options`` may hold ``precision`` ("float32" default, "float64") and ``steps``
+    (a shorter scene, for quick checks).
+    """
+    started = time.perf_counter()
+    ensure_runtime(settings.options.get("precision", "float32"))
+    dtype = torch_dtype()
+    try:
+        law = load_law(code, dtype)
+    except LawCodeError as error:
+        return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
+    observed = ground_truth(spec, settings.options.get("steps"))
+    scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
+    if spec.searched == "elastic":
+        rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
+    else:
+        rollout = Rollout(scene, law, known_elastic_law(dtype))
+    inner = InnerSettings(
+        epochs=spec.epochs if settings.epochs is None else settings.epochs,
+        learning_rate=settings.learning_rate or spec.learning_rate,
+        reset_every=spec.reset_every,
+    )
+    try:
+        result = optimize(rollout, law, observed, inner)
+    except LawError as error:
+        return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
+    except NoFiniteEpoch as error:
+        return Evaluation.invalid(
+            f"the simulation is unstable with this law ({error})",
+            seconds=time.perf_counter() - started,
+        )
+    except Exception as error:  # a law failing inside forward, e.g. a shape mismatch
+        return Evaluation.invalid(
+            f"the law raised {describe_error(error)} during the simulation",
+            seconds=time.perf_counter() - started,
+        )
+    corners = feedback.corner_particles(observed.positions[0])
+    text = "\n\n".join(
+        [
+            feedback.optimization_text(result, inner.learning_rate),
+            feedback.trajectory_text(result.positions, observed.positions, scene.dt, corners),
+        ]
+    )
+    return Evaluation(
+        valid=math.isfinite(result.best_loss),
+        loss=result.best_loss,
+        feedback=text,
+        parameters=result.best_parameters,
+        curves={"loss": result.losses, **result.parameters},
+        extras={"best_epoch": result.best_epoch, "stopped": result.stopped,
+                "epoch_seconds": result.seconds},  # fmt: skip
+        seconds=time.perf_counter() - started,
+    )

@@ -1,0 +1,84 @@
+"""The text a constitutive-law evaluation reports back to the model.
+
+Three parts, as the method asks for: how the loss evolved during the inner optimization (and
+its best value), how each fitted parameter evolved (and its value at the best epoch), and where
+a few representative particles (corners of the body) went, simulated versus observed, at about
+ten moments of the trajectory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tasks.constitutive.inner import InnerResult
+
+CURVE_POINTS = 10  # values listed per curve
+TRAJECTORY_FRAMES = 10
+CORNERS = 4  # particles listed
+
+
+def corner_particles(positions: np.ndarray, count: int = CORNERS) -> list[int]:
+    """Indices of particles at alternating corners of the body's bounding box."""
+    signs = [(-1, -1, -1), (1, 1, -1), (1, -1, 1), (-1, 1, 1),
+             (1, -1, -1), (-1, 1, -1), (-1, -1, 1), (1, 1, 1)]  # fmt: skip
+    centred = positions - positions.mean(axis=0)
+    return [int(np.argmax(centred @ np.array(sign, float))) for sign in signs[:count]]
+
+
+def _sampled(values: list[float], points: int = CURVE_POINTS) -> list[tuple[int, float]]:
+    if len(values) <= points:
+        return list(enumerate(values))
+    picks = np.unique(np.linspace(0, len(values) - 1, points).round().astype(int))
+    return [(int(i), values[i]) for i in picks]
+
+
+def _curve(values: list[float]) -> str:
+    return ", ".join(f"{i}: {value:.4g}" for i, value in _sampled(values))
+
+
+def optimization_text(result: InnerResult, learning_rate: float) -> str:
+    """Loss and parameter curves with their best values."""
+    epochs = len(result.losses)
+    lines = []
+    if not result.parameters:
+        lines.append(
+            f"The law has no trainable parameters; it was simulated once. Loss (mean squared "
+            f"position error over all steps, m^2): {result.best_loss:.6g}."
+        )
+    else:
+        lines += [
+            f"Inner optimization: Adam (learning rate {learning_rate:g}) over {epochs} "
+            "evaluations of the whole trajectory.",
+            f"Loss (mean squared position error over all steps, m^2), by epoch: "
+            f"{_curve(result.losses)}",
+            f"Best loss {result.best_loss:.6g} at epoch {result.best_epoch}.",
+            "Parameters by epoch (the value at the best epoch is kept):",
+        ]
+        best = result.best_parameters
+        for name, values in result.parameters.items():
+            lines.append(f"- {name}: {_curve(values)}; best {best[name]:.6g}")
+    if result.stopped:
+        lines.append(f"The optimization stopped early at {result.stopped}.")
+    return "\n".join(lines)
+
+
+def trajectory_text(
+    predicted: np.ndarray, observed: np.ndarray, dt: float, particles: list[int]
+) -> str:
+    """Positions of ``particles`` at ~10 moments, simulated next to observed."""
+    steps = observed.shape[0] - 1
+    frames = np.linspace(0, steps, TRAJECTORY_FRAMES + 1).round().astype(int)[1:]
+    lines = ["Trajectories of corner particles (x, y, z in m; y points up), simulated vs observed:"]
+    for number, particle in enumerate(particles):
+        start = observed[0, particle]
+        lines.append(f"Particle {number} (starts at {_xyz(start)}):")
+        for frame in frames:
+            sim, obs = predicted[frame, particle], observed[frame, particle]
+            lines.append(
+                f"  t = {frame * dt:.3f} s: simulated {_xyz(sim)}, observed {_xyz(obs)}"
+            )
+    return "\n".join(lines)
+
+
+def _xyz(point: np.ndarray) -> str:
+    return "(" + ", ".join(f"{c:.3f}" for c in point) + ")"

@@ -1,0 +1,51 @@
+"""Taichi's batched SVD serves bridges.linalg.svd in float32 (run in a float32 subprocess)."""
+
+import json
+import subprocess
+import sys
+
+SCRIPT = """
+import json
+import torch
+import taichi_mpm as tm
+from bridges.fast_svd import taichi_svd
+from bridges.linalg import svd, stable_linalg
+
+before = taichi_svd(torch.eye(3).expand(4, 3, 3))  # no Taichi runtime yet: None
+tm.init(precision="float32")
+torch.manual_seed(0)
+F = torch.eye(3) + 0.4 * torch.randn(500, 3, 3)
+F[:7] = -F[:7]  # inverted
+U, S, Vh = taichi_svd(F)
+U2, S2, Vh2 = svd(F)
+with stable_linalg():
+    U3, S3, Vh3 = torch.linalg.svd(F)
+reference = torch.linalg.svdvals(F.double())
+print(json.dumps({
+    "before": before is None,
+    "float64": taichi_svd(F.double()) is None,
+    "reconstruction": (U @ torch.diag_embed(S) @ Vh - F).abs().max().item(),
+    "rotations": (torch.linalg.det(U) - 1).abs().max().item()
+    + (torch.linalg.det(Vh) - 1).abs().max().item(),
+    "values": (S.abs().double() - reference).abs().max().item(),
+    "sorted": bool((S[:, :2].abs() >= S[:, 1:].abs()).all()),
+    "negative_when_inverted": bool((S[:, 2] < 0).eq(torch.linalg.det(F) < 0).all()),
+    "svd_uses_it": (S2 - S).abs().max().item(),
+    "patched_unsigned": bool((S3 >= 0).all()),
+    "patched_reconstruction": (U3 @ torch.diag_embed(S3) @ Vh3 - F).abs().max().item(),
+}))
+"""
+
+
+def test_taichi_svd_in_float32():
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True
+    )
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["before"] and result["float64"]
+    assert result["reconstruction"] < 1e-5
+    assert result["rotations"] < 1e-5
+    assert result["values"] < 1e-5
+    assert result["sorted"] and result["negative_when_inverted"]
+    assert result["svd_uses_it"] == 0.0
+    assert result["patched_unsigned"] and result["patched_reconstruction"] < 1e-5

@@ -1,0 +1,131 @@
+"""The ``sga-agent`` command line: task listing, evaluation output and exit codes."""
+
+import json
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from sga_agent import registry
+from sga_agent.cli import main
+from sga_agent.cli.evaluate import extract_solution
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DOUBLE = "tests.sga_agent.doubles:ExecTask"
+
+
+@pytest.fixture
+def fake_registry(monkeypatch):
+    """A registry holding the test double and a broken plugin instead of the real tasks."""
+    points = {
+        name: EntryPoint(name, value, registry.GROUP)
+        for name, value in [
+            ("double", DOUBLE),
+            ("broken", "tests.sga_agent.doubles:broken_task"),
+        ]
+    }
+    monkeypatch.setattr(registry, "task_entry_points", lambda: points)
+
+
+@pytest.fixture
+def in_repo(monkeypatch):
+    """`evaluate` imports a module:callable task from the current directory."""
+    monkeypatch.chdir(REPO_ROOT)
+
+
+def write(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "solution.py"
+    path.write_text(text)
+    return str(path)
+
+
+def test_tasks_lists_every_task_even_a_broken_one(fake_registry):
+    result = CliRunner().invoke(main, ["tasks"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[0].split()[:2] == ["broken", "?"]
+    assert lines[0].endswith("(failed to load: RuntimeError: this plugin is broken)")
+    assert lines[1].startswith("double")
+    assert "equation" in lines[1] and "Executes the candidate" in lines[1]
+
+
+def test_tasks_with_an_empty_registry(monkeypatch):
+    monkeypatch.setattr(registry, "task_entry_points", dict)
+    result = CliRunner().invoke(main, ["tasks"])
+    assert result.exit_code == 0
+    assert "no tasks are registered" in result.output
+
+
+def test_evaluate_prints_parameters_loss_and_feedback(tmp_path, in_repo):
+    answer = (
+        "First try:\n```python\nloss = 9.0\n```\nBetter:\n"
+        "```python\nloss = 0.25\nparameters = {'youngs_modulus': 2e5}\n"
+        "feedback = 'fits well'\n```\n"
+    )
+    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, write(tmp_path, answer)])
+    assert result.exit_code == 0, result.output
+    assert "fitted parameters" in result.output
+    assert "youngs_modulus" in result.output and "200000" in result.output
+    assert "loss: 0.25" in result.output
+    assert "fits well" in result.output
+
+
+def test_evaluate_json_passes_settings(tmp_path, in_repo):
+    args = ["evaluate", "--task", DOUBLE, "--epochs", "5", "--lr", "0.01", "--json"]
+    result = CliRunner().invoke(main, [*args, write(tmp_path, "loss = 1.5\n")])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["valid"] and data["loss"] == 1.5
+    assert data["extras"]["settings"]["epochs"] == 5
+    assert data["extras"]["settings"]["learning_rate"] == 0.01
+
+
+def test_evaluate_invalid_solution_exits_1_with_reason(tmp_path, in_repo):
+    file = write(tmp_path, "raise ValueError('bad law')\n")
+    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, file])
+    assert result.exit_code == 1
+    assert result.stdout == ""
+    assert result.stderr == "invalid: evaluation raised ValueError: bad law\n"
+    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, "--json", file])
+    assert result.exit_code == 1
+    data = json.loads(result.stdout)
+    assert not data["valid"] and data["loss"] == "inf"
+    assert "ValueError: bad law" in data["extras"]["traceback"]
+
+
+def test_evaluate_timeout_option(tmp_path, in_repo):
+    file = write(tmp_path, "import time\ntime.sleep(60)\n")
+    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, "--timeout", "1", file])
+    assert result.exit_code == 1
+    assert result.stderr == "invalid: exceeded the time limit of 1 s\n"
+
+
+def test_evaluate_unknown_task_suggests_the_closest(tmp_path, fake_registry):
+    result = CliRunner().invoke(main, ["evaluate", "--task", "doubel", write(tmp_path, "")])
+    assert result.exit_code == 2
+    assert "no task named 'doubel'" in result.output
+    assert "Did you mean 'double'?" in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["--task", DOUBLE, "missing.py"], "does not exist"),
+        (["x.py"], "Missing option '--task'"),
+        (["--task", DOUBLE, "--epochs", "-1", "x.py"], "--epochs"),
+        (["--task", DOUBLE, "--lr", "0", "x.py"], "--lr"),
+        (["--task", DOUBLE, "--memory-mb", "10", "x.py"], "--memory-mb"),
+    ],
+)
+def test_evaluate_usage_errors_exit_2(tmp_path, monkeypatch, args, fragment):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.py").write_text("")
+    result = CliRunner().invoke(main, ["evaluate", *args])
+    assert result.exit_code == 2, result.output
+    assert fragment in result.output
+
+
+def test_extract_solution_takes_the_last_python_block():
+    assert extract_solution("a\n```python\nx = 1\n```\n```python\nx = 2\n```\n") == "x = 2\n"
+    assert extract_solution("x = 3\n") == "x = 3\n"

@@ -1,0 +1,118 @@
+"""Constitutive-law tasks: the true law scores ~0, the seed scores clearly worse, the inner
+optimization fits parameters started 2x off, and bad laws come back invalid with a reason."""
+
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+from sga_agent.registry import load_task
+from sga_agent.task import EvaluationSettings, Task
+
+LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
+TRUTH = {
+    "elastic": "neo_hookean.py",
+    "plasticine": "von_mises.py",
+    "granular": "drucker_prager.py",
+    "fluid": "fluid.py",
+    "imaginary": "mixture.py",
+}
+QUICK = {"steps": 200}  # two teacher-forced segments: enough to tell the laws apart
+
+
+def score(name: str, code: str, epochs: int = 0, **settings) -> object:
+    return load_task(name).evaluate(
+        code, EvaluationSettings(epochs=epochs, options=QUICK, **settings)
+    )
+
+
+@pytest.mark.parametrize("name", list(TRUTH))
+def test_truth_scores_noise_and_seed_scores_worse(name):
+    task = load_task(name)
+    assert isinstance(task, Task) and task.kind == "equation"
+    truth = score(name, (LAWS / TRUTH[name]).read_text())
+    seed = score(name, task.seed_solution())
+    assert truth.valid and seed.valid, (truth.reason, seed.reason)
+    assert truth.loss < 1e-8
+    assert seed.loss > 1e3 * max(truth.loss, 1e-12)
+    assert "Trajectories of corner particles" in truth.feedback
+
+
+def _shifted(code: str, replacements: dict[str, float]) -> str:
+    for argument, value in replacements.items():
+        code, count = re.subn(rf"({argument}: float = )[^,)]+", rf"\g<1>{value!r}", code)
+        assert count == 1, argument
+    return code
+
+
+@pytest.mark.parametrize(
+    ("name", "start"),
+    [
+        ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}),
+        ("plasticine", {"log_yield_stress": math.log(6e4)}),
+        ("fluid", {"fluidity": 0.5}),
+    ],
+)
+def test_inner_optimization_recovers_parameters_started_2x_off(name, start):
+    code = _shifted((LAWS / TRUTH[name]).read_text(), start)
+    result = score(name, code, epochs=30, learning_rate=0.1)
+    assert result.valid, result.reason
+    first = result.curves["loss"][0]
+    assert result.loss < first / 100
+    assert result.loss == min(result.curves["loss"])  # the best epoch is kept
+    assert set(start) <= set(result.parameters)
+
+
+def test_parameter_free_law_is_scored_once():
+    result = score("fluid", (LAWS / "fluid.py").read_text().replace("nn.Parameter(", "("), 30)
+    assert result.valid and result.curves["loss"] == [result.loss]
+    assert "no trainable parameters" in result.feedback
+
+
+BROKEN = {
+    "syntax": ("class Physics(nn.Module:\n    pass\n", "does not compile: SyntaxError"),
+    "no class": ("import torch\nx = 1\n", "no class named 'Physics'"),
+    "not a module": ("class Physics:\n    pass\n", "deriving from torch.nn.Module"),
+    "init needs arguments": (
+        "import torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def __init__(self, E):\n        super().__init__()\n"
+        "    def forward(self, F):\n        return F\n",
+        "need default values (missing for: E)",
+    ),
+    "wrong signature": (
+        "import torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F, J):\n        return F\n",
+        "forward must take exactly one tensor F",
+    ),
+    "wrong shape": (
+        "import torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        return F[:, 0]\n",
+        "must return F_corrected of shape",
+    ),
+    "nan": (
+        "import torch, torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        return F * float('nan')\n",
+        "returns non-finite F_corrected",
+    ),
+    "nan later": (
+        "import torch, torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        return F * 10.0\n",
+        "the simulation is unstable with this law (epoch 0: the simulation became non-finite",
+    ),
+    "raises": (
+        "import torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        return F @ F[:, :2]\n",
+        "the law raised RuntimeError",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(BROKEN))
+def test_broken_laws_are_invalid_with_a_reason(case):
+    code, reason = BROKEN[case]
+    result = score("plasticine", code)
+    assert not result.valid
+    assert result.loss == math.inf
+    assert reason in result.reason
+    assert "\n" not in result.reason
