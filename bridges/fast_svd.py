@@ -16,7 +16,6 @@ from taichi_mpm import runtime
 from taichi_mpm.simulator import PARALLEL_THRESHOLD
 
 
-
 def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
     """Signed (det U = det V = +1) SVD ``(U, S, Vh)`` of (..., 3, 3) ``F``, or None.
 
@@ -35,9 +34,10 @@ def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
         return None
     from bridges import kernels  # compiles on first use only
 
-    flat = F.detach().reshape(-1, 3, 3).contiguous()
-    U, V = torch.empty_like(flat), torch.empty_like(flat)
-    S = flat.new_empty(flat.shape[0], 3)
-    kernels.svd3(flat, U, S, V, flat.shape[0] < PARALLEL_THRESHOLD)
+    flat = F.detach().reshape(-1, 9).contiguous()
+    out = flat.new_empty(flat.shape[0], 21)  # U, S, V per row
+    kernels.svd3(flat, out, flat.shape[0] < PARALLEL_THRESHOLD)
     batch = F.shape[:-2]
-    return U.reshape(*batch, 3, 3), S.reshape(*batch, 3), V.reshape(*batch, 3, 3).mT
+    U = out[:, :9].reshape(*batch, 3, 3)
+    V = out[:, 12:].reshape(*batch, 3, 3)
+    return U, out[:, 9:12].reshape(*batch, 3), V.mT

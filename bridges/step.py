@@ -70,7 +70,7 @@ class Transfer:
         self.grid_velocity = array(vec, (1, n, n, n))
         walls = scene.walls
         friction = walls.friction if walls.kind == "separate" else 0.0
-        self._transfer_settings = (
+        self._settings = (
             scene.dx, scene.dt, scene.particle_volume, scene.particle_mass, *scene.gravity,
             _WALL_CODES[walls.kind], walls.thickness, friction,
         )  # fmt: skip
@@ -85,25 +85,17 @@ class Transfer:
         return (self.x, self.v, self.C, self.F, self.F_corrected, self.stress, self.grid_mass,
                 self.grid_momentum, self.grid_velocity)  # fmt: skip
 
-    def _run_forward(self, x, v, C, F, stress) -> None:
-        kernels.load_and_transfer(x, v, C, F, stress, *self._arrays(), *self._transfer_settings,
-                                  self._serial)  # fmt: skip
-
-    def forward(self, x, v, C, F, stress):
-        """Next (x, v, C, F_trial) from detached contiguous tensors of this Transfer's dtype."""
-        self._run_forward(x, v, C, F, stress)
-        out = (torch.empty_like(x), torch.empty_like(v), torch.empty_like(C), torch.empty_like(C))
-        kernels.store_state(self.x, self.v, self.C, self.F, *out, self._serial)
+    def forward(self, packed: torch.Tensor) -> torch.Tensor:
+        """Packed (N, 24) next state (x, v, C, F_trial) from a packed (N, 33) input."""
+        out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
+        kernels.step_forward(packed, out, *self._arrays(), *self._settings, self._serial)
         return out
 
-    def backward(self, inputs, output_grads):
-        """dL/d(x, v, C, F_corrected, stress) of one step from dL/d(x', v', C', F_trial')."""
-        self._run_forward(*inputs)
-        kernels.seed_output_gradients(
-            *output_grads, self.x.grad, self.v.grad, self.C.grad, self.F.grad,
-            self.F_corrected.grad, self.stress.grad, self.grid_mass.grad,
-            self.grid_momentum.grad, self.grid_velocity.grad, self._serial,
-        )  # fmt: skip
+    def backward(self, packed: torch.Tensor, output_grad: torch.Tensor) -> torch.Tensor:
+        """Packed (N, 33) dL/d(input) of one step from its packed (N, 24) dL/d(output)."""
+        arrays = self._arrays()
+        kernels.recompute_and_seed(packed, output_grad, *arrays, *(a.grad for a in arrays),
+                                   *self._settings, self._serial)  # fmt: skip
         sc = self.scene
         tk.g2p.grad(self.x, self.v, self.C, self.F, self.F_corrected, self.grid_velocity, 0,
                     sc.dx, sc.dt, self._serial)  # fmt: skip
@@ -111,46 +103,65 @@ class Transfer:
                             *self._grid_settings, self._serial)  # fmt: skip
         tk.p2g.grad(self.x, self.v, self.C, self.stress, 0, self.grid_mass, self.grid_momentum,
                     sc.dx, sc.dt, sc.particle_volume, sc.particle_mass, self._serial)  # fmt: skip
-        grads = tuple(torch.empty_like(t) for t in inputs)
-        kernels.store_input_gradients(
-            self.x.grad, self.v.grad, self.C.grad, self.F_corrected.grad, self.stress.grad,
-            *grads, self._serial,
-        )  # fmt: skip
-        return grads
+        input_grad = packed.new_empty(packed.shape)
+        kernels.store_input_gradients(self.x.grad, self.v.grad, self.C.grad,
+                                      self.F_corrected.grad, self.stress.grad, input_grad,
+                                      self._serial)  # fmt: skip
+        return input_grad
 
-    def prepare(self, tensor: torch.Tensor, name: str, shape: tuple[int, ...]) -> torch.Tensor:
-        """``tensor`` detached, contiguous and of this Transfer's dtype; checks its shape."""
-        if tuple(tensor.shape) != shape:
-            raise ValueError(f"{name} must have shape {shape}, got {tuple(tensor.shape)}")
-        return tensor.detach().to(self.dtype).contiguous()
+
+def _flat(tensor: torch.Tensor, name: str, shape: tuple[int, ...], dtype) -> torch.Tensor:
+    if tuple(tensor.shape) != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {tuple(tensor.shape)}")
+    if tensor.dtype != dtype:
+        raise TypeError(
+            f"{name} is {tensor.dtype} but the simulation runs in {dtype} "
+            "(taichi_mpm.init precision): convert the law's parameters with .to(dtype)"
+        )
+    return tensor.detach().reshape(shape[0], -1)
+
+
+def _unpack(packed: torch.Tensor, columns: tuple[int, ...]) -> tuple[torch.Tensor, ...]:
+    """Views of packed rows: widths 3 -> (N, 3), 9 -> (N, 3, 3)."""
+    views, start = [], 0
+    for width in columns:
+        part = packed[:, start : start + width]
+        views.append(part if width == 3 else part.unflatten(1, (3, 3)))
+        start += width
+    return tuple(views)
 
 
 class _MPMStep(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x, v, C, F, stress, transfer: Transfer):
-        N = transfer.num_particles
-        inputs = tuple(
-            transfer.prepare(t, name, shape)
-            for t, name, shape in zip(
-                (x, v, C, F, stress),
-                ("x", "v", "C", "F", "stress"),
-                ((N, 3), (N, 3), (N, 3, 3), (N, 3, 3), (N, 3, 3)),
-                strict=True,
-            )
+        N, dtype = transfer.num_particles, transfer.dtype
+        packed = torch.cat(
+            [
+                _flat(x, "x", (N, 3), dtype),
+                _flat(v, "v", (N, 3), dtype),
+                _flat(C, "C", (N, 3, 3), dtype),
+                _flat(F, "F", (N, 3, 3), dtype),
+                _flat(stress, "stress", (N, 3, 3), dtype),
+            ],
+            dim=1,
         )
         ctx.transfer = transfer
-        ctx.save_for_backward(*inputs)
-        return transfer.forward(*inputs)
+        ctx.save_for_backward(packed)
+        return _unpack(transfer.forward(packed), (3, 3, 9, 9))
 
     @staticmethod
     def backward(ctx, *output_grads):
-        inputs = ctx.saved_tensors
-        grads = tuple(
-            torch.zeros_like(like) if g is None else g.detach().to(like.dtype).contiguous()
-            for g, like in zip(output_grads, (inputs[0], inputs[1], inputs[2], inputs[2]),
-                               strict=True)  # fmt: skip
+        (packed,) = ctx.saved_tensors
+        N = packed.shape[0]
+        widths = (3, 3, 9, 9)
+        output_grad = torch.cat(
+            [
+                packed.new_zeros(N, w) if g is None else g.reshape(N, w)
+                for g, w in zip(output_grads, widths, strict=True)
+            ],
+            dim=1,
         )
-        return (*ctx.transfer.backward(inputs, grads), None)
+        return (*_unpack(ctx.transfer.backward(packed, output_grad), (3, 3, 9, 9, 9)), None)
 
 
 def mpm_step(x, v, C, F, stress, transfer: Transfer):
@@ -173,4 +184,5 @@ def mpm_step(x, v, C, F, stress, transfer: Transfer):
     -------
     x, v, C, F_trial of the next step.
     """
-    return _MPMStep.apply(x, v, C, F, stress, transfer)
+    dtype = transfer.dtype
+    return _MPMStep.apply(*(t.to(dtype) for t in (x, v, C, F, stress)), transfer)
