@@ -39,3 +39,13 @@ def test_readme_sysid_example_runs(tmp_path):
         timeout=900,
     )
     assert result.returncode == 0, result.stderr[-2000:]
+
+
+def test_readme_bridges_example_runs():
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
+    example = next(block for block in blocks if "trajectory_loss" in block)
+    check = "\nassert result.loss > 1e-9 and plastic.yield_stress.grad < 0\n"
+    result = subprocess.run(
+        [sys.executable, "-c", example + check], capture_output=True, text=True, timeout=900
+    )
+    assert result.returncode == 0, result.stderr[-2000:]

@@ -47,16 +47,19 @@ def _shifted(code: str, replacements: dict[str, float]) -> str:
 
 
 @pytest.mark.parametrize(
-    ("name", "start"),
+    ("name", "start", "epochs", "learning_rate"),
     [
-        ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}),
-        ("plasticine", {"log_yield_stress": math.log(6e4)}),
-        ("fluid", {"fluidity": 0.5}),
+        ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}, 16,
+         0.08),
+        ("plasticine", {"log_yield_stress": math.log(6e4)}, 10, 0.1),
+        ("fluid", {"fluidity": 0.5}, 12, 0.15),
     ],
-)
-def test_inner_optimization_recovers_parameters_started_2x_off(name, start):
+)  # fmt: skip
+def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epochs, learning_rate):
+    """Fewer epochs at a larger step than the paper's 30 at 3e-2, to fit the test budget;
+    scripts/make_ground_truth.py --fit checks the paper's settings on the full scene."""
     code = _shifted((LAWS / TRUTH[name]).read_text(), start)
-    result = score(name, code, epochs=30, learning_rate=0.1)
+    result = score(name, code, epochs=epochs, learning_rate=learning_rate)
     assert result.valid, result.reason
     first = result.curves["loss"][0]
     assert result.loss < first / 100
