@@ -110,7 +110,11 @@ class Rollout:
         return State(*mpm_step(state.x, state.v, state.C, F, stress, self.transfer))
 
     def check_laws(self, state: State) -> None:
-        """Raise :class:`LawError` unless both laws map ``state.F`` to finite (N, 3, 3) tensors."""
+        """Check that both laws map ``state.F`` to finite (N, 3, 3) tensors.
+
+        Raises :class:`LawError` for a wrong type or shape, :class:`UnstableSimulation` for
+        NaN or inf.
+        """
         expected = tuple(state.F.shape)
         with torch.no_grad(), stable_linalg():
             F = _checked(self.plastic(state.F), "plastic law", "F_corrected", expected)
@@ -257,5 +261,7 @@ def _checked(value, law: str, what: str, expected: tuple[int, ...]) -> torch.Ten
             f"got {tuple(value.shape)}"
         )
     if not torch.isfinite(value).all():
-        raise LawError(f"the {law} returns non-finite {what} (NaN or inf) at the initial state")
+        raise UnstableSimulation(
+            f"the {law} returns non-finite {what} (NaN or inf) at the initial state", 0
+        )
     return value

@@ -15,6 +15,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
 
 TaskKind = Literal["equation", "entity"]
+#: Outcome of an evaluation: scored, or why not (invalid code, an exception, NaN/inf, a limit).
+STATUSES = ("ok", "invalid", "error", "unstable", "timeout", "out_of_memory", "crashed")
 
 
 @dataclass(frozen=True)
@@ -49,8 +51,9 @@ class EvaluationSettings:
 class Evaluation:
     """Outcome of evaluating one candidate solution.
 
-    ``valid`` is False when the candidate could not be scored (it does not load, has the wrong
-    signature, went unstable...); ``reason`` then says why in one line and ``loss`` is inf.
+    ``valid`` is False when the candidate could not be scored; ``status`` says how (one of
+    :data:`STATUSES`: "invalid" code, an "error" raised, "unstable" NaN/inf, or a sandbox limit:
+    "timeout", "out_of_memory", "crashed"), ``reason`` says why in one line and ``loss`` is inf.
     ``feedback`` is the text shown to the model in later prompts. ``parameters`` are the fitted
     values of the best epoch, ``curves`` maps a name ("loss", a parameter name) to its values
     over the inner optimization, ``extras`` holds any further JSON-serialisable record.
@@ -64,11 +67,19 @@ class Evaluation:
     curves: dict[str, list[float]] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+    status: str = "ok"
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
 
     @classmethod
-    def invalid(cls, reason: str, feedback: str | None = None, **fields: Any) -> Evaluation:
+    def invalid(
+        cls, reason: str, feedback: str | None = None, status: str = "invalid", **fields: Any
+    ) -> Evaluation:
         """An unscored candidate: infinite loss, the reason doubling as feedback by default."""
-        return cls(False, math.inf, feedback if feedback is not None else reason, reason, **fields)
+        text = feedback if feedback is not None else reason
+        return cls(False, math.inf, text, reason, status=status, **fields)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable dict (an infinite loss becomes the string "inf")."""

@@ -75,11 +75,13 @@ def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) ->
     except NoFiniteEpoch as error:
         return Evaluation.invalid(
             f"the simulation is unstable with this law ({error})",
+            status="unstable",
             seconds=time.perf_counter() - started,
         )
     except Exception as error:  # a law failing inside forward, e.g. a shape mismatch
         return Evaluation.invalid(
             f"the law raised {describe_error(error)} during the simulation",
+            status="error",
             seconds=time.perf_counter() - started,
         )
     corners = feedback.corner_particles(observed.positions[0])

@@ -111,6 +111,13 @@ BROKEN = {
 }
 
 
+STATUS = {case: "invalid" for case in BROKEN} | {
+    "nan": "unstable",
+    "nan later": "unstable",
+    "raises": "error",
+}
+
+
 @pytest.mark.parametrize("case", list(BROKEN))
 def test_broken_laws_are_invalid_with_a_reason(case):
     code, reason = BROKEN[case]
@@ -119,3 +126,4 @@ def test_broken_laws_are_invalid_with_a_reason(case):
     assert result.loss == math.inf
     assert reason in result.reason
     assert "\n" not in result.reason
+    assert result.status == STATUS[case]
