@@ -15,11 +15,11 @@ LAM = E * NU / ((1 + NU) * (1 - 2 * NU))
 
 
 class Physics(nn.Module):
-    def __init__(self, log_friction_angle: float = math.log(25.0)):
+    def __init__(self, log_friction_angle: float = 3.2188758248682006):
         """Drucker-Prager plasticity of dry sand.
 
         Args:
-            log_friction_angle (float): natural log of the friction angle in degrees.
+            log_friction_angle (float): natural log of the friction angle in degrees (ln 25).
         """
         super().__init__()
         self.log_friction_angle = nn.Parameter(torch.tensor(log_friction_angle))

@@ -20,8 +20,8 @@ class Physics(nn.Module):
         weight_von_mises: float = 0.5,
         weight_sand: float = 0.3,
         weight_fluid: float = 0.2,
-        log_yield_stress: float = math.log(3e4),
-        log_friction_angle: float = math.log(25.0),
+        log_yield_stress: float = 10.308952660644293,  # ln 3e4
+        log_friction_angle: float = 3.2188758248682006,  # ln 25
     ):
         """Mixture of three return mappings.
 
