@@ -1,6 +1,6 @@
 """Command line interface: ``sga-agent``.
 
-One module per command: :mod:`.tasks`, :mod:`.evaluate`.
+One module per command: :mod:`.tasks`, :mod:`.evaluate`, :mod:`.search`, :mod:`.resume`.
 """
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ def main() -> None:
     """sga-agent: LLM-driven bilevel search for physics code and molecules.
 
     `sga-agent tasks` lists the registered tasks; `sga-agent evaluate` scores one solution
-    file in the sandbox, exactly as the search does.
+    file in the sandbox, exactly as the search does; `sga-agent search` runs the search and
+    `sga-agent resume` continues a stopped one.
     """
 
 
 # The commands register themselves on ``main`` when imported.
-from sga_agent.cli import evaluate, tasks  # noqa: E402, F401
+from sga_agent.cli import evaluate, resume, search, tasks  # noqa: E402, F401

@@ -1,0 +1,121 @@
+"""``sga-agent search``: run the bilevel search on a task."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+
+from sga_agent import registry, runner
+from sga_agent.cli import main
+from sga_agent.cli.progress import SearchProgress, print_result
+from sga_agent.config import PRESETS, ConfigError, SearchConfig
+from sga_agent.run_store import RunStore, RunStoreError
+
+
+def _task_options(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]):
+    options: dict[str, Any] = {}
+    for item in values:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            raise click.BadParameter(f"{item!r} is not KEY=VALUE (e.g. steps=200)", ctx, param)
+        for convert in (int, float):
+            try:
+                options[key] = convert(raw)
+                break
+            except ValueError:
+                continue
+        else:
+            options[key] = raw
+    return options
+
+
+def _check_task(ctx: click.Context, param: click.Parameter, name: str) -> str:
+    if name not in registry.task_entry_points():
+        try:
+            registry.load_task(name)
+        except registry.UnknownTaskError as error:
+            raise click.BadParameter(str(error), ctx, param) from error
+    return name
+
+
+@main.command()
+@click.option("--task", "task", required=True, callback=_check_task, metavar="NAME",
+              help="Registered task (see `sga-agent tasks`).")
+@click.option("--model", metavar="PROVIDER/MODEL", envvar="SGA_MODEL",
+              help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
+              "20240620, hosted_vllm/NAME; the key comes from the provider's environment "
+              "variable (OPENAI_API_KEY, ANTHROPIC_API_KEY, ...).")
+@click.option("--api-base", metavar="URL", help="Base URL of an OpenAI-compatible server.")
+@click.option("--replay", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Re-run a recorded search: its model answers, no model call.")
+@click.option("--preset", type=click.Choice(list(PRESETS)), default="sga", show_default=True,
+              help="Settings of a column of the paper's Table 1 (overridden by the options).")
+@click.option("--iterations", type=click.IntRange(min=1), help="Outer iterations.")
+@click.option("--top-k", type=click.IntRange(min=1), help="Solutions shown per prompt (K).")
+@click.option("--exploit", type=click.IntRange(min=0), help="Offspring per iteration at T_l.")
+@click.option("--explore", type=click.IntRange(min=0), help="Offspring per iteration at T_h.")
+@click.option("--t-exploit", "exploit_temperature", type=click.FloatRange(0, 2),
+              help="Exploit temperature T_l [0.5].")
+@click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
+              help="Explore temperature T_h [1.0].")
+@click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
+              help="Do not fit parameters: evaluate the proposed defaults.")
+@click.option("--epochs", type=click.IntRange(min=0), help="Inner-optimization epochs.")
+@click.option("--lr", "learning_rate", type=click.FloatRange(min=0, min_open=True),
+              help="Inner-optimization learning rate.")
+@click.option("--option", "task_options", multiple=True, callback=_task_options,
+              metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200).")
+@click.option("--workers", type=click.IntRange(min=1), default=os.cpu_count() or 1,
+              show_default=True, help="Candidates evaluated at once (one process each).")
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=1), default=900.0,
+              show_default=True, help="Wall-clock limit of one evaluation (s).")
+@click.option("--memory-mb", type=click.IntRange(min=64), default=4096, show_default=True,
+              help="Memory limit of one evaluation (MiB).")
+@click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
+@click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
+@click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the run.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"),
+              show_default=True, help="Parent folder of the run folder.")
+@click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
+def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings) -> None:
+    """Search TASK's solutions with a model and differentiable simulation.
+
+    Each iteration shows the model the top-K solutions with their feedback, asks for
+    --exploit answers at T_l and --explore at T_h, evaluates them in sandboxed workers and
+    keeps the best. The run folder records everything; `sga-agent resume RUN_DIR` continues
+    a run that was stopped.
+    """  # fmt: skip
+    if model and replay:
+        raise click.UsageError("give either --model or --replay, not both")
+    if not model and not replay:
+        raise click.UsageError(
+            "no model: pass --model PROVIDER/MODEL (for example openai/gpt-4o with "
+            "OPENAI_API_KEY set) or --replay RUN_DIR"
+        )
+    proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
+    try:
+        config = SearchConfig.from_preset(
+            preset, proposer=proposer, api_base=api_base,
+            bilevel=False if no_bilevel else None, **settings,
+        )  # fmt: skip
+        if replay:
+            runner.replayed_answers(config)  # fail early on a bad folder
+    except (ConfigError, RunStoreError) as error:
+        raise click.UsageError(str(error)) from error
+    store = RunStore.create(out, config, {"proposer": proposer})
+    execute(config, store, as_json)
+
+
+def execute(config: SearchConfig, store: RunStore, as_json: bool) -> None:
+    """Run with a progress display, then print the result."""
+    console = Console(stderr=as_json, highlight=False)
+    if not as_json:
+        console.print(f"run folder: {store.path}")
+    with SearchProgress(console, config) as progress:
+        result = runner.run(config, store, progress)
+    print_result(console, store, result, as_json)

@@ -1,0 +1,127 @@
+"""Settings of one search run, and the presets that reproduce the paper's Table 1 columns.
+
+A run is fully described by a :class:`SearchConfig`; it is written to the run folder, so
+``sga-agent resume`` continues with exactly the same settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+#: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off.
+PRESETS: dict[str, dict[str, Any]] = {
+    "sga": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": True},
+    "no-bilevel": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": False},
+    "no-exploit": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": True},
+    "cot": {"iterations": 1, "top_k": 5, "exploit": 1, "explore": 0, "bilevel": False},
+    "funsearch": {"iterations": 20, "top_k": 2, "exploit": 0, "explore": 4, "bilevel": False},
+    "eureka": {"iterations": 5, "top_k": 1, "exploit": 0, "explore": 16, "bilevel": False},
+    "opro": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": False},
+}
+
+
+class ConfigError(ValueError):
+    """A search setting is invalid; the message names it and the fix."""
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Everything that determines a search run.
+
+    Parameters
+    ----------
+    task : str
+        Registered task name (``sga-agent tasks``).
+    proposer : str
+        Who proposes: a litellm model string ("openai/gpt-4o"), or "replay:RUN_DIR".
+    api_base : str, optional
+        Base URL of an OpenAI-compatible server (local models).
+    iterations, top_k, exploit, explore : int
+        Outer iterations; solutions shown per prompt (K); offspring per iteration asked at the
+        exploit (low) and explore (high) temperature (M_l, M_h).
+    exploit_temperature, explore_temperature : float
+        T_l and T_h (paper: 0.5 and 1.0).
+    bilevel : bool
+        Fit each candidate's continuous parameters (off: evaluate the defaults as proposed).
+    epochs, learning_rate : optional
+        Inner optimization overrides (default: the task's).
+    task_options : dict
+        Task-specific evaluation options (e.g. ``{"steps": 200}`` for a short scene).
+    workers : int
+        Candidates evaluated at once, each in its own sandboxed process.
+    timeout_s, memory_mb : limits of one evaluation.
+    max_usd, max_tokens, max_evaluations : optional budgets; the run stops cleanly at them.
+    seed : int
+        Seed passed to the evaluations and the offline proposers.
+    """
+
+    task: str
+    proposer: str
+    api_base: str | None = None
+    preset: str = "sga"
+    iterations: int = 5
+    top_k: int = 5
+    exploit: int = 4
+    explore: int = 12
+    exploit_temperature: float = 0.5
+    explore_temperature: float = 1.0
+    bilevel: bool = True
+    epochs: int | None = None
+    learning_rate: float | None = None
+    task_options: dict[str, Any] = field(default_factory=dict)
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    timeout_s: float = 900.0
+    memory_mb: int = 4096
+    max_usd: float | None = None
+    max_tokens: int | None = None
+    max_evaluations: int | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("iterations", "top_k", "workers"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("exploit", "explore"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.exploit + self.explore < 1:
+            raise ConfigError("exploit + explore must be at least 1 (offspring per iteration)")
+        for name in ("exploit_temperature", "explore_temperature"):
+            if not 0 <= getattr(self, name) <= 2:
+                raise ConfigError(f"{name} must lie in [0, 2], got {getattr(self, name)}")
+        for name in ("max_usd", "max_tokens", "max_evaluations"):
+            value = getattr(self, name)
+            if value is not None and value <= 0:
+                raise ConfigError(f"{name} must be positive, got {value}")
+
+    @classmethod
+    def from_preset(cls, preset: str, **settings: Any) -> SearchConfig:
+        """The preset's values, overridden by ``settings`` that are not None."""
+        if preset not in PRESETS:
+            close = difflib.get_close_matches(preset, PRESETS, n=1)
+            hint = f" Did you mean {close[0]!r}?" if close else ""
+            raise ConfigError(
+                f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.{hint}"
+            )
+        values = {**PRESETS[preset], "preset": preset}
+        values.update({key: value for key, value in settings.items() if value is not None})
+        return cls(**values)
+
+    @property
+    def offspring(self) -> int:
+        return self.exploit + self.explore
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SearchConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ConfigError(f"unknown settings in the run config: {', '.join(sorted(unknown))}")
+        return cls(**data)

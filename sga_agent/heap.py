@@ -1,0 +1,50 @@
+"""The population of evaluated solutions and its top-K (pure, no I/O)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One evaluated candidate: its id, code, loss (inf when invalid) and feedback."""
+
+    candidate: str
+    code: str
+    loss: float
+    feedback: str
+    valid: bool
+    order: int = 0  # insertion order: ties go to the earlier candidate
+
+    def key(self) -> tuple[float, int]:
+        return (self.loss if math.isfinite(self.loss) else math.inf, self.order)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready id, loss (an infinite loss as the string "inf") and validity."""
+        loss = self.loss if math.isfinite(self.loss) else str(self.loss)
+        return {"candidate": self.candidate, "loss": loss, "valid": self.valid}
+
+
+@dataclass
+class SolutionHeap:
+    """All evaluated solutions, ranked by loss (lower is better)."""
+
+    entries: list[Entry] = field(default_factory=list)
+
+    def push(self, candidate: str, code: str, loss: float, feedback: str, valid: bool) -> Entry:
+        entry = Entry(candidate, code, loss, feedback, valid, order=len(self.entries))
+        self.entries.append(entry)
+        return entry
+
+    def top(self, k: int) -> list[Entry]:
+        """The k best entries, best first (valid ones before invalid ones)."""
+        return sorted(self.entries, key=Entry.key)[:k]
+
+    def best(self) -> Entry | None:
+        ranked = self.top(1)
+        return ranked[0] if ranked else None
+
+    def __len__(self) -> int:
+        return len(self.entries)

@@ -1,0 +1,519 @@
+"""Reading a model's answer, and checking its code before anything runs it.
+
+:func:`parse_response` splits an answer into its sections ("### Analysis", "### Step-by-Step
+Plan", "### Code") and takes the last python code block. :func:`check_code` inspects that code
+through its syntax tree only (nothing is executed) and raises :class:`CodeRejected`, whose
+message is feedback for the next prompt, when it breaks a rule:
+
+- imports only from the allowed top-level modules (torch, math and numpy for equation tasks,
+  none for entity tasks), never from :data:`FORBIDDEN_MODULES`;
+- no builtins that run code, touch files or inspect the interpreter (:data:`FORBIDDEN_NAMES`),
+  and ``getattr``/``setattr``/``delattr``/``hasattr`` only with a literal attribute name;
+- no dunder attributes besides ``__init__``, no private attributes of imported modules, and no
+  attribute that loads, saves or compiles code or data (:data:`FORBIDDEN_ATTRIBUTES`), nor one
+  named like a forbidden module (``torch.os``);
+- per kind, the shape the prompt asks for: one class ``Physics(nn.Module)`` with defaulted
+  ``__init__`` arguments and ``forward(self, F)`` (equation), or literal assignments of
+  ``SMILES`` and ``coordinates`` and nothing else (entity).
+
+These checks give fast, readable feedback and stop obvious hostility; they are not the
+security boundary, which is the sandboxed worker that evaluates a candidate.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import warnings
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass
+
+#: Imports allowed by default, per task kind (top-level module names).
+DEFAULT_IMPORTS: dict[str, tuple[str, ...]] = {
+    "equation": ("torch", "math", "numpy"),
+    "entity": (),
+}
+#: Modules that reach files, processes, the network or the interpreter's machinery. Never
+#: importable, and never reachable as an attribute (``torch.os``).
+FORBIDDEN_MODULES = frozenset({
+    "builtins", "code", "codeop", "concurrent", "ctypes", "dbm", "gc", "glob", "http",
+    "importlib", "inspect", "io", "marshal", "mmap", "multiprocessing", "os", "pathlib",
+    "pickle", "platform", "posix", "pty", "requests", "runpy", "shelve", "shutil", "signal",
+    "site", "socket", "subprocess", "sys", "sysconfig", "tempfile", "threading", "urllib",
+    "webbrowser", "zipfile", "_thread",
+})  # fmt: skip
+#: Attributes (of any object) that load, save, download or compile code or data:
+#: ``torch.hub``, ``torch.load``/``save``, ``torch.jit``, ``torch.compile``,
+#: ``torch.utils.cpp_extension``, ``torch.ops``/``classes``/``library``/``_C``,
+#: ``numpy.load``/``save``/``fromfile``/``ndarray.tofile`` and relatives.
+FORBIDDEN_ATTRIBUTES = frozenset({
+    "_C", "DataSource", "classes", "compile", "cpp_extension", "ctypeslib", "distributed",
+    "distutils", "dump", "f2py", "from_file", "fromfile", "fromregex", "genfromtxt", "hub",
+    "jit", "library", "load", "loadtxt", "memmap", "open_memmap", "ops", "package",
+    "recfromcsv", "recfromtxt", "save", "savetxt", "savez", "savez_compressed",
+    "serialization", "tensorboard", "tofile",
+})  # fmt: skip
+#: Builtins that run code, touch files or expose the interpreter; rejected wherever they occur.
+FORBIDDEN_NAMES = frozenset({
+    "__import__", "breakpoint", "compile", "eval", "exec", "globals", "locals", "open", "vars",
+})  # fmt: skip
+#: Builtins for an interactive session; rejected unless the code binds the name itself (a
+#: ``forward(self, input)`` argument is fine).
+INTERACTIVE_NAMES = frozenset({"copyright", "credits", "exit", "help", "input", "license", "quit"})
+_ATTRIBUTE_FUNCTIONS = frozenset({"delattr", "getattr", "hasattr", "setattr"})
+_ALLOWED_DUNDERS = frozenset({"__init__"})
+_CODE_TAGS = frozenset({"", "python", "python3", "py"})
+_SECTIONS = {"analysis": "analysis", "step-by-step plan": "plan", "step by step plan": "plan",
+             "plan": "plan", "code": "code"}  # fmt: skip
+#: ``SMILES = "`` at a line start; read as a raw string when a backslash breaks the parse, as
+#: the molecule tasks do.
+_SMILES_LITERAL = re.compile(r"""^(\s*SMILES\s*(?::[^=\n]*)?=\s*)(["'])""", re.M)
+_HEADING = re.compile(r"^ {0,3}#{1,6}\s+(?:\d+[.)]\s*)?(.*?)[\s#]*$")  # "## 2. Plan" too
+_MAX_PROBLEMS = 5
+CLASS_NAME = "Physics"
+
+
+@dataclass(frozen=True)
+class ParsedResponse:
+    """A model's answer, split up.
+
+    Parameters
+    ----------
+    sections : dict of str to str
+        Text of the "### Analysis", "### Step-by-Step Plan" and "### Code" sections, under the
+        keys "analysis", "plan" and "code", for those present (the last one wins if repeated).
+    code : str or None
+        The last python (or untagged) fenced code block; None when the answer has none.
+    """
+
+    sections: dict[str, str]
+    code: str | None
+
+
+class CodeRejected(ValueError):
+    """The code breaks a rule; the message says which and where, for the next prompt."""
+
+
+def parse_response(text: str) -> ParsedResponse:
+    """Split a model's answer into its sections and its last python code block.
+
+    Headings inside code blocks do not count; a code block left open at the end of the answer
+    (a truncated answer) runs to the end.
+    """
+    lines = text.splitlines()
+    headings: list[tuple[int, str]] = []
+    code: str | None = None
+    fences = list(_fences(lines))
+    for start, stop, tag in fences:
+        if tag in _CODE_TAGS:
+            code = "\n".join(lines[start:stop]).strip("\n") + "\n"
+    inside = {i for start, stop, _ in fences for i in range(start - 1, stop + 1)}
+    for i, line in enumerate(lines):
+        match = _HEADING.match(line)
+        if i not in inside and match:
+            key = _SECTIONS.get(match.group(1).strip("*_: ").lower())
+            if key:
+                headings.append((i, key))
+    sections = {}
+    bounds = [i for i, _ in headings] + [len(lines)]
+    for (i, key), end in zip(headings, bounds[1:], strict=True):
+        sections[key] = "\n".join(lines[i + 1 : end]).strip()
+    return ParsedResponse(sections=sections, code=code)
+
+
+def _fences(lines: list[str]) -> Iterator[tuple[int, int, str]]:
+    """``(first, end, tag)`` of each fenced block: body lines ``first:end``, lowercase tag."""
+    i = 0
+    while i < len(lines):
+        opening = lines[i].lstrip(" ")
+        if opening.startswith("```") and len(lines[i]) - len(opening) <= 3:
+            ticks = len(opening) - len(opening.lstrip("`"))
+            words = opening[ticks:].split()
+            end = i + 1
+            while end < len(lines) and not _closes(lines[end], ticks):
+                end += 1
+            yield i + 1, end, words[0].lower() if words else ""
+            i = end
+        i += 1
+
+
+def _closes(line: str, ticks: int) -> bool:
+    stripped = line.strip()
+    return len(stripped) >= ticks and set(stripped) == {"`"}
+
+
+def check_code(code: str, kind: str, allowed_imports: Collection[str] | None = None) -> None:
+    """Check a solution's code statically, without running it.
+
+    Parameters
+    ----------
+    code : str
+        The code block of an answer.
+    kind : str
+        The task kind: ``"equation"`` (a ``Physics`` module) or ``"entity"`` (literal data).
+    allowed_imports : collection of str, optional
+        Top-level modules the code may import; default :data:`DEFAULT_IMPORTS` of ``kind``.
+        :data:`FORBIDDEN_MODULES` stay forbidden even when listed.
+
+    Raises
+    ------
+    CodeRejected
+        The code breaks a rule; the message lists up to five problems, one sentence each,
+        prefixed with the line number where there is one.
+    ValueError
+        ``kind`` is unknown.
+    """
+    if kind not in DEFAULT_IMPORTS:
+        raise ValueError(f"kind must be one of {tuple(DEFAULT_IMPORTS)}, got {kind!r}")
+    allowed = DEFAULT_IMPORTS[kind] if allowed_imports is None else tuple(allowed_imports)
+    tree = _parse(code, kind)
+    checker = _Checker(tree, allowed)
+    checker.visit(tree)
+    problems = checker.problems
+    if kind == "equation":
+        problems += _check_equation(tree, checker.aliases)
+    else:
+        problems += _check_entity(tree)
+    if problems:
+        raise CodeRejected(_report(problems))
+
+
+def _parse(code: str, kind: str) -> ast.Module:
+    """``ast.parse``, quietly; entity code may hold a SMILES with backslashes (``C\\N``)."""
+    attempts = [code]
+    raw = _SMILES_LITERAL.sub(r"\1r\2", code)
+    if kind == "entity" and raw != code:
+        attempts.append(raw)  # the SMILES literal read as a raw string
+    errors: list[SyntaxError] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", (DeprecationWarning, SyntaxWarning))
+        for text in attempts:
+            try:
+                return ast.parse(text)
+            except SyntaxError as error:
+                errors.append(error)
+            except (RecursionError, MemoryError):
+                raise CodeRejected("the code is too deeply nested to be read") from None
+    where = f"line {errors[0].lineno}: " if errors[0].lineno else ""
+    raise CodeRejected(f"{where}the code is not valid Python ({errors[0].msg})")
+
+
+def _report(problems: list[tuple[int, str]]) -> str:
+    unique = sorted(set(problems), key=lambda problem: (problem[0] == 0, problem))
+    lines = [f"line {line}: {text}" if line else text for line, text in unique[:_MAX_PROBLEMS]]
+    if len(unique) > _MAX_PROBLEMS:
+        lines.append(f"(and {len(unique) - _MAX_PROBLEMS} more problems)")
+    return "\n".join(lines)
+
+
+def _listing(names: Collection[str]) -> str:
+    names = list(names)
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _dunder(name: str) -> bool:
+    return len(name) > 4 and name.startswith("__") and name.endswith("__")
+
+
+def _attribute_ok(name: str) -> bool:
+    return not (
+        (_dunder(name) and name not in _ALLOWED_DUNDERS)
+        or name in FORBIDDEN_ATTRIBUTES
+        or name in FORBIDDEN_MODULES
+    )
+
+
+class _Checker(ast.NodeVisitor):
+    """Collects ``(line, sentence)`` problems of imports, names and attributes."""
+
+    def __init__(self, tree: ast.Module, allowed: tuple[str, ...]) -> None:
+        self.allowed = allowed
+        self.problems: list[tuple[int, str]] = []
+        self.aliases = _aliases(tree)
+        self.bound = _bound_names(tree)
+
+    def reject(self, node: ast.AST, text: str) -> None:
+        self.problems.append((getattr(node, "lineno", 0), text))
+
+    def _imports_hint(self) -> str:
+        if not self.allowed:
+            return "this task's code may not import anything"
+        return f"only {_listing(self.allowed)} may be imported"
+
+    def _check_module(self, node: ast.AST, dotted: str) -> bool:
+        parts = dotted.split(".")
+        if parts[0] in FORBIDDEN_MODULES:
+            self.reject(
+                node,
+                f"importing {parts[0]!r} is not allowed: solutions may not reach "
+                f"files, processes or the network; {self._imports_hint()}",
+            )
+        elif parts[0] not in self.allowed:
+            self.reject(node, f"importing {parts[0]!r} is not allowed; {self._imports_hint()}")
+        else:
+            return self._check_path(node, parts)
+        return False
+
+    def _check_path(self, node: ast.AST, parts: list[str]) -> bool:
+        """Reject a forbidden or private part of an imported module path; True when fine."""
+        for part in parts[1:]:
+            if (part.startswith("_") and not _dunder(part)) or not _attribute_ok(part):
+                self.reject(node, f"{'.'.join(parts)!r} is not allowed; " + _why(part))
+                return False
+        return True
+
+    def visit_Import(self, node: ast.Import) -> None:
+        for alias in node.names:
+            self._check_module(node, alias.name)
+
+    def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
+        if node.level:
+            self.reject(node, f"relative imports are not allowed; {self._imports_hint()}")
+        elif self._check_module(node, node.module or ""):
+            for alias in node.names:
+                if alias.name == "*":
+                    self.reject(
+                        node,
+                        f"'from {node.module} import *' is not allowed; import "
+                        "the names you use explicitly",
+                    )
+                else:
+                    self._check_path(node, [*(node.module or "").split("."), alias.name])
+
+    def visit_Name(self, node: ast.Name) -> None:
+        name = node.id
+        if name in FORBIDDEN_NAMES:
+            self.reject(node, f"{name!r} is not allowed: " + _why(name))
+        elif name in INTERACTIVE_NAMES and name not in self.bound:
+            self.reject(
+                node,
+                f"{name!r} is not allowed: a solution runs without a terminal or a user to talk to",
+            )
+        elif name in _ATTRIBUTE_FUNCTIONS:
+            self.reject(
+                node,
+                f"{name!r} may only be called directly, with a literal attribute "
+                f'name: {name}(obj, "name", ...)',
+            )
+        elif _dunder(name) and name != "__name__":
+            self.reject(
+                node,
+                f"the name {name!r} is not allowed; dunder names reach the interpreter's internals",
+            )
+
+    def visit_Attribute(self, node: ast.Attribute) -> None:
+        private = node.attr.startswith("_") and _dotted(node, self.aliases) is not None
+        if not _attribute_ok(node.attr) or private:
+            self.reject(node, f"{_source(node)!r} is not allowed; " + _why(node.attr))
+        else:
+            self.generic_visit(node)
+
+    def visit_Call(self, node: ast.Call) -> None:
+        func = node.func
+        if isinstance(func, ast.Name) and func.id in _ATTRIBUTE_FUNCTIONS:
+            name = node.args[1] if len(node.args) > 1 else None
+            if not (isinstance(name, ast.Constant) and isinstance(name.value, str)):
+                self.reject(
+                    node,
+                    f"{func.id}() needs a plain string literal as the attribute "
+                    f'name, e.g. {func.id}(self, "alpha", ...); better use '
+                    "self.alpha",
+                )
+            elif not _attribute_ok(name.value) and func.id != "hasattr":
+                self.reject(node, f"accessing {name.value!r} is not allowed; " + _why(name.value))
+            for child in [*node.args, *node.keywords]:
+                self.visit(child)
+        else:
+            self.generic_visit(node)
+
+
+def _why(name: str) -> str:
+    if name in FORBIDDEN_MODULES:
+        return "solutions may not reach files, processes or the network"
+    if name in FORBIDDEN_NAMES:
+        return "solutions may not run generated code, open files or inspect the interpreter"
+    if _dunder(name):
+        return "no dunder attribute other than __init__ may be used"
+    if name.startswith("_"):
+        return "use the public API of the module"
+    return "solutions may not load, save, download or compile code or data"
+
+
+def _source(node: ast.expr) -> str:
+    """The code of ``node`` as written, or ``.attr`` when that is long."""
+    text = ast.unparse(node)
+    return text if len(text) <= 60 or not isinstance(node, ast.Attribute) else "." + node.attr
+
+
+def _aliases(tree: ast.Module) -> dict[str, str]:
+    """Names bound by imports, mapped to the dotted path they stand for."""
+    found = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname:
+                    found[alias.asname] = alias.name
+                else:
+                    top = alias.name.split(".")[0]
+                    found[top] = top
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            for alias in node.names:
+                found[alias.asname or alias.name] = f"{node.module}.{alias.name}"
+    return found
+
+
+def _bound_names(tree: ast.Module) -> set[str]:
+    """Every name the code binds: assignments, arguments, definitions, imports."""
+    bound = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and not isinstance(node.ctx, ast.Load):
+            bound.add(node.id)
+        elif isinstance(node, ast.arg):
+            bound.add(node.arg)
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            bound.add(node.name)
+        elif isinstance(node, ast.alias):
+            bound.add((node.asname or node.name).split(".")[0])
+    return bound
+
+
+def _dotted(node: ast.expr, aliases: dict[str, str]) -> str | None:
+    """``torch.nn.Module`` for an attribute chain rooted at an imported name, else None."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if isinstance(node, ast.Name) and node.id in aliases:
+        return ".".join([aliases[node.id], *reversed(parts)])
+    return None
+
+
+def _check_equation(tree: ast.Module, aliases: dict[str, str]) -> Iterator[tuple[int, str]]:
+    """One class ``Physics(nn.Module)``, defaulted ``__init__``, ``forward(self, F)``."""
+    classes = {node.name: node for node in tree.body if isinstance(node, ast.ClassDef)}
+    found = [node for node in tree.body if isinstance(node, ast.ClassDef)]
+    found = [node for node in found if node.name == CLASS_NAME]
+    if not found:
+        text = f"the code defines no top-level class {CLASS_NAME!r}; define "
+        yield 0, text + f"class {CLASS_NAME}(nn.Module) as in the code template"
+        return
+    if len(found) > 1:
+        yield found[1].lineno, f"class {CLASS_NAME} is defined twice; define it exactly once"
+        return
+    lineage = _lineage(found[0], classes, aliases)
+    if lineage is None:
+        bases = ", ".join(ast.unparse(base) for base in found[0].bases) or "nothing"
+        text = f"class {CLASS_NAME} must derive from nn.Module (torch.nn.Module); it derives"
+        yield found[0].lineno, f"{text} from {bases}"
+        return
+    methods = {
+        node.name: node
+        for klass in reversed(lineage)
+        for node in klass.body
+        if isinstance(node, ast.FunctionDef)
+    }
+    missing = _required(methods["__init__"].args) if "__init__" in methods else []
+    if missing:
+        text = f"every argument of {CLASS_NAME}.__init__ besides self needs a default value"
+        text += f" (the starting value of the fit); missing for: {', '.join(missing)}"
+        yield methods["__init__"].lineno, text
+    if "forward" not in methods:
+        text = f"class {CLASS_NAME} defines no forward method; add forward(self, F)"
+        yield found[0].lineno, text + " as in the code template"
+        return
+    required = _required(methods["forward"].args)
+    if len(required) != 1 and not (methods["forward"].args.vararg and not required):
+        text = f"{CLASS_NAME}.forward must take exactly one required argument besides self,"
+        text += f" the input F; it requires {', '.join(required) or 'no argument'}"
+        yield methods["forward"].lineno, text
+
+
+def _required(args: ast.arguments) -> list[str]:
+    """Names of the arguments without a default value, the first (self) left out."""
+    positional = [*args.posonlyargs, *args.args][1:]
+    names = [a.arg for a in positional[: len(positional) - len(args.defaults)]]
+    return names + [
+        a.arg for a, d in zip(args.kwonlyargs, args.kw_defaults, strict=True) if d is None
+    ]
+
+
+def _lineage(
+    cls: ast.ClassDef, classes: dict[str, ast.ClassDef], aliases: dict[str, str]
+) -> list[ast.ClassDef] | None:
+    """``cls`` and its same-file base classes, if one of them derives from nn.Module."""
+    seen = [cls]
+    while True:
+        if any(_dotted(base, aliases) == "torch.nn.Module" for base in seen[-1].bases):
+            return seen
+        local = [b.id for b in seen[-1].bases if isinstance(b, ast.Name) and b.id in classes]
+        if not local or classes[local[0]] in seen:
+            return None
+        seen.append(classes[local[0]])
+
+
+def _check_entity(tree: ast.Module) -> Iterator[tuple[int, str]]:
+    """Only literal assignments, among them ``SMILES`` (str) and ``coordinates`` (rows)."""
+    example = 'e.g. SMILES = "CCO" and coordinates = [[0.0, 0.0, 0.0], ...]'
+    values: dict[str, tuple[int, object]] = {}
+    assigned: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            continue  # judged by the import rules
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+            continue  # a docstring
+        assignment = _assignment(node)
+        if assignment is None:
+            text = "only assignments of literal values to plain names are allowed"
+            yield node.lineno, f"{text} ({example}); nothing else is run"
+            continue
+        names, value = assignment
+        assigned.update(names)
+        if isinstance(node, ast.AnnAssign) and not _plain_annotation(node.annotation):
+            yield node.lineno, "a type annotation may only name types, such as list[list[float]]"
+        try:
+            literal = ast.literal_eval(value)
+        except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+            text = f"the value of {names[0]!r} must be a literal (numbers, strings, lists)"
+            yield node.lineno, f"{text}, without function calls, names or arithmetic"
+            continue
+        values.update({name: (node.lineno, literal) for name in names})
+    missing = [name for name in ("SMILES", "coordinates") if name not in assigned]
+    if missing:
+        yield 0, f"the code must assign {' and '.join(missing)} ({example})"
+    if "SMILES" in values and not isinstance(values["SMILES"][1], str):
+        yield values["SMILES"][0], "SMILES must be a string literal"
+    if "coordinates" in values and not _rows(values["coordinates"][1]):
+        text = "coordinates must be a non-empty list of rows of numbers, [[x, y, z], ...]"
+        yield values["coordinates"][0], text
+
+
+def _assignment(node: ast.stmt) -> tuple[list[str], ast.expr] | None:
+    """Names and value of ``a = b = value`` or ``a: T = value``; None for any other statement."""
+    if isinstance(node, ast.Assign):
+        targets, value = node.targets, node.value
+    elif isinstance(node, ast.AnnAssign) and node.value is not None:
+        targets, value = [node.target], node.value
+    else:
+        return None
+    names = [t.id for t in targets if isinstance(t, ast.Name)]
+    return (names, value) if len(names) == len(targets) else None
+
+
+_ANNOTATION_NODES = (ast.Name, ast.Attribute, ast.Subscript, ast.Tuple, ast.Constant, ast.BinOp,
+                     ast.BitOr, ast.Load)  # fmt: skip
+
+
+def _plain_annotation(node: ast.expr) -> bool:
+    return all(isinstance(child, _ANNOTATION_NODES) for child in ast.walk(node))
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _rows(value: object) -> bool:
+    return (
+        isinstance(value, list | tuple)
+        and bool(value)
+        and all(isinstance(row, list | tuple) and row and all(map(_number, row)) for row in value)
+    )

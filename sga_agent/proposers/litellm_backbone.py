@@ -1,0 +1,368 @@
+"""The LLM backbone: any model litellm can reach, asked for batches of samples at one temperature.
+
+litellm is imported on first use (it takes seconds), with its price map read from the installed
+package rather than the internet. Keys come from the environment under each provider's usual
+name (OPENAI_API_KEY, ANTHROPIC_API_KEY, MISTRAL_API_KEY, ...) and never appear in the errors and
+log lines written here.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import difflib
+import logging
+import math
+import os
+import random
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from types import ModuleType
+from typing import Any
+
+from sga_agent.proposers.base import Proposal, ProposerError
+from sga_agent.proposers.redact import RedactingFilter, redact
+
+log = logging.getLogger(__name__)
+
+MODEL_EXAMPLES = (
+    '"openai/gpt-4o", "anthropic/claude-3-5-sonnet-20240620", "mistral/mistral-large-latest", '
+    'or "hosted_vllm/NAME" / "openai/NAME" with api_base for a local OpenAI-compatible server'
+)
+#: Providers whose chat API returns ``n`` choices from one request.
+N_PROVIDERS = frozenset({"openai", "azure", "hosted_vllm"})
+#: Longest wait between two attempts, in seconds.
+MAX_BACKOFF_S = 60.0
+#: HTTP statuses worth another attempt (besides litellm's rate-limit and server-error classes).
+RETRY_STATUSES = frozenset({408, 429})
+#: HTTP statuses of a key the provider refused (unauthenticated, forbidden).
+AUTH_STATUSES = frozenset({401, 403})
+LITELLM_LOGGERS = ("LiteLLM", "LiteLLM Router", "LiteLLM Proxy")
+NO_PRICE_NOTE = "model not in litellm's price map: cost counted as 0"
+_MAX_ERROR_CHARS = 500
+
+Completion = Callable[..., Any]
+
+
+class BackboneSettingsError(ValueError):
+    """A backbone setting is invalid; the message names it and the fix."""
+
+
+def import_litellm() -> ModuleType:
+    """litellm, imported on first call, reading prices locally and printing no help banners."""
+    os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
+    import litellm
+
+    litellm.suppress_debug_info = True
+    for name in LITELLM_LOGGERS:
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactingFilter) for f in logger.filters):
+            logger.addFilter(RedactingFilter())
+    return litellm
+
+
+@dataclass(frozen=True)
+class BackboneSettings:
+    """How to reach the model and how patiently.
+
+    Parameters
+    ----------
+    model : str
+        litellm model string "provider/name", e.g. "openai/gpt-4o".
+    api_base : str, optional
+        Base URL of an OpenAI-compatible server, e.g. "http://127.0.0.1:8000/v1".
+    timeout_s : float
+        Seconds one request may take before it counts as failed (and is retried).
+    max_retries : int
+        Further attempts after a rate limit, server error, lost connection or timeout.
+    backoff_s : float
+        Wait before the first retry; it doubles per retry, jittered, up to ``MAX_BACKOFF_S``.
+    max_tokens : int, optional
+        Cap on the tokens of one response (default: the provider's).
+    concurrency : int
+        Requests in flight at once when samples are asked one per request.
+    use_n : bool, optional
+        Ask for all samples in one request with ``n``; None decides by provider
+        (``N_PROVIDERS``), else one request per sample.
+    drop_params : bool
+        Let litellm drop parameters a model refuses (e.g. temperature for some reasoning
+        models) instead of failing.
+    """
+
+    model: str
+    api_base: str | None = None
+    timeout_s: float = 120.0
+    max_retries: int = 4
+    backoff_s: float = 2.0
+    max_tokens: int | None = None
+    concurrency: int = 4
+    use_n: bool | None = None
+    drop_params: bool = True
+
+    def __post_init__(self) -> None:
+        provider, _, name = self.model.partition("/")
+        if not provider or not name:
+            raise BackboneSettingsError(
+                f"model {self.model!r} needs a provider prefix, 'provider/name', "
+                f"e.g. {MODEL_EXAMPLES}"
+            )
+        if self.api_base is not None and not self.api_base.startswith(("http://", "https://")):
+            raise BackboneSettingsError(
+                f"api_base must be an http(s) URL such as http://127.0.0.1:8000/v1, "
+                f"got {redact(self.api_base)!r}"
+            )
+        if not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
+            raise BackboneSettingsError(f"timeout_s must be positive, got {self.timeout_s}")
+        if not (math.isfinite(self.backoff_s) and self.backoff_s >= 0):
+            raise BackboneSettingsError(f"backoff_s must be >= 0, got {self.backoff_s}")
+        if self.max_retries < 0:
+            raise BackboneSettingsError(f"max_retries must be >= 0, got {self.max_retries}")
+        if self.concurrency < 1:
+            raise BackboneSettingsError(f"concurrency must be at least 1, got {self.concurrency}")
+        if self.max_tokens is not None and self.max_tokens < 1:
+            raise BackboneSettingsError(f"max_tokens must be at least 1, got {self.max_tokens}")
+
+    @property
+    def provider(self) -> str:
+        return self.model.partition("/")[0]
+
+
+def backoff_wait(retry: int, first_s: float, cap_s: float = MAX_BACKOFF_S) -> float:
+    """Seconds to wait before retry number ``retry`` (0-based).
+
+    The ceiling doubles from ``first_s`` up to ``cap_s``; the wait is drawn from the upper half
+    of it so that parallel requests hitting one rate limit do not retry in lockstep.
+    """
+    ceiling = min(cap_s, first_s * 2.0**retry)
+    return random.uniform(ceiling / 2, ceiling)
+
+
+class LiteLLMProposer:
+    """A :class:`~sga_agent.proposers.base.Proposer` backed by ``litellm.completion``.
+
+    Parameters
+    ----------
+    settings : BackboneSettings
+        The model and how to reach it.
+    completion : callable, optional
+        Stand-in for ``litellm.completion`` (tests); same keyword arguments and response.
+    sleep : callable
+        Waits between attempts (tests pass a recorder so nothing really waits).
+
+    Notes
+    -----
+    ``propose`` returns the proposals that succeeded: all ``n``, or fewer when some requests
+    failed for good (logged as warnings); it raises ``ProposerError`` only when none did. With
+    ``n`` in one request, a provider that returns fewer choices is topped up with single
+    requests.
+    """
+
+    def __init__(
+        self,
+        settings: BackboneSettings,
+        completion: Completion | None = None,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        self.settings = settings
+        self._litellm = import_litellm()
+        _check_provider(settings.provider, self._litellm)
+        self._completion = completion if completion is not None else self._litellm.completion
+        self._sleep = sleep
+        use_n = settings.use_n
+        self.use_n = settings.provider in N_PROVIDERS if use_n is None else use_n
+
+    @property
+    def name(self) -> str:
+        return f"litellm:{self.settings.model}"
+
+    def describe(self) -> dict[str, Any]:
+        """Settings for the run config; URL credentials in api_base are masked."""
+        settings = asdict(self.settings)
+        if self.settings.api_base is not None:
+            settings["api_base"] = redact(self.settings.api_base)
+        return {"name": self.name, **settings, "use_n": self.use_n}
+
+    def propose(self, messages: list[dict[str, str]], temperature: float, n: int) -> list[Proposal]:
+        """Up to ``n`` sampled responses to ``messages`` at ``temperature``.
+
+        Raises
+        ------
+        ProposerError
+            No request succeeded; the message says why and what to change.
+        """
+        if n < 0:
+            raise ValueError(f"n must be >= 0, got {n}")
+        if n == 0:
+            return []
+        if not (self.use_n and n > 1):
+            return self._singles(messages, temperature, n)
+        proposals = self._request(messages, temperature, n)
+        if len(proposals) < n:
+            log.info("%s returned %d of %d choices", self.settings.model, len(proposals), n)
+            proposals += self._singles(messages, temperature, n - len(proposals), required=False)
+        return proposals[:n]
+
+    def _singles(
+        self, messages: list[dict[str, str]], temperature: float, count: int, required: bool = True
+    ) -> list[Proposal]:
+        """``count`` one-sample requests, ``concurrency`` at a time."""
+        if count == 1 and required:
+            return self._request(messages, temperature, 1)
+        workers = min(self.settings.concurrency, count)
+        with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(self._request, messages, temperature, 1) for _ in range(count)]
+            proposals: list[Proposal] = []
+            errors: list[ProposerError] = []
+            for future in futures:
+                try:
+                    proposals += future.result()
+                except ProposerError as error:
+                    errors.append(error)
+        if errors and not proposals and required:
+            raise ProposerError(f"all {count} requests failed; the first: {errors[0]}")
+        if errors:
+            log.warning("%d of %d requests failed; the first: %s", len(errors), count, errors[0])
+        return proposals
+
+    def _request(
+        self, messages: list[dict[str, str]], temperature: float, n: int
+    ) -> list[Proposal]:
+        """One request for ``n`` choices, retried on transient failures."""
+        settings = self.settings
+        kwargs: dict[str, Any] = {
+            "model": settings.model,
+            "messages": messages,
+            "temperature": temperature,
+            "timeout": settings.timeout_s,
+            "max_retries": 0,  # the provider SDK's own retries would hide ours
+            "drop_params": settings.drop_params,
+        }
+        if n > 1:
+            kwargs["n"] = n
+        if settings.api_base is not None:
+            kwargs["api_base"] = settings.api_base
+        if settings.max_tokens is not None:
+            kwargs["max_tokens"] = settings.max_tokens
+        attempts = settings.max_retries + 1
+        start = time.monotonic()
+        for attempt in range(attempts):
+            try:
+                response = self._completion(**kwargs)
+                break
+            except Exception as error:
+                retry, message = self._diagnose(error)
+                if not retry:
+                    raise ProposerError(message) from None
+                if attempt + 1 == attempts:
+                    raise ProposerError(
+                        f"gave up on {settings.model} after {attempts} attempts: {message}"
+                    ) from None
+                wait = backoff_wait(attempt, settings.backoff_s)
+                log.warning(
+                    "attempt %d of %d failed: %s; retrying in %.1f s",
+                    attempt + 1,
+                    attempts,
+                    message,
+                    wait,
+                )
+                self._sleep(wait)
+        return self._proposals(response, temperature, time.monotonic() - start)
+
+    def _diagnose(self, error: Exception) -> tuple[bool, str]:
+        """Whether ``error`` is worth another attempt, and a key-free message with the fix."""
+        lm = self._litellm
+        model = self.settings.model
+        text = _describe_error(error)
+        if isinstance(error, lm.Timeout):
+            return True, (
+                f"{model} did not answer within timeout_s={self.settings.timeout_s:g} s "
+                f"(raise timeout_s, or check the server): {text}"
+            )
+        missing = self._missing_keys()
+        if missing:
+            hint = ""
+            if self.settings.api_base is not None:
+                hint = " (any value does for a local server that ignores keys)"
+            return False, f"no API key for {model}: set {' or '.join(missing)}{hint}. {text}"
+        status = getattr(error, "status_code", None)
+        if isinstance(error, lm.AuthenticationError) or status in AUTH_STATUSES:
+            return False, (
+                f"authentication failed for {model}: the provider rejected the API key in the "
+                f"environment; check it. {text}"
+            )
+        transient = (
+            lm.RateLimitError,
+            lm.APIConnectionError,
+            lm.InternalServerError,
+            lm.ServiceUnavailableError,
+            lm.BadGatewayError,
+        )
+        if isinstance(error, transient) or (
+            isinstance(status, int) and (status in RETRY_STATUSES or status >= 500)
+        ):
+            return True, text
+        if isinstance(error, lm.NotFoundError):
+            return False, f"{model} was not found: check the model name and api_base. {text}"
+        return False, f"{model} rejected the request: {text}"
+
+    def _missing_keys(self) -> list[str]:
+        """API-key variables litellm expects for this model but cannot find in the environment."""
+        report = self._litellm.validate_environment(
+            model=self.settings.model, api_base=self.settings.api_base
+        )
+        return [name for name in report.get("missing_keys", []) if name.endswith("_API_KEY")]
+
+    def _proposals(self, response: Any, temperature: float, seconds: float) -> list[Proposal]:
+        """One proposal per choice, sharing the response's tokens and cost among them."""
+        choices = response.choices
+        if not choices:
+            raise ProposerError(f"{self.settings.model} answered with no choices")
+        usage = getattr(response, "usage", None)
+        prompt = _shares(int(getattr(usage, "prompt_tokens", 0) or 0), len(choices))
+        completion = _shares(int(getattr(usage, "completion_tokens", 0) or 0), len(choices))
+        cost, note = self._cost(response)
+        return [
+            Proposal(
+                text=choice.message.content or "",
+                model=self.settings.model,
+                temperature=temperature,
+                prompt_tokens=prompt[i],
+                completion_tokens=completion[i],
+                cost_usd=cost / len(choices),
+                cost_note=note,
+                seconds=seconds,
+            )
+            for i, choice in enumerate(choices)
+        ]
+
+    def _cost(self, response: Any) -> tuple[float, str]:
+        """The response's price in USD from litellm's local price map, or 0 with a note."""
+        try:
+            return float(self._litellm.completion_cost(completion_response=response)), ""
+        except Exception:
+            return 0.0, NO_PRICE_NOTE
+
+
+def _check_provider(provider: str, litellm: ModuleType) -> None:
+    known = [getattr(p, "value", p) for p in litellm.provider_list]
+    if provider not in known:
+        close = difflib.get_close_matches(provider, known, n=1)
+        hint = f" Did you mean {close[0]!r}?" if close else ""
+        raise BackboneSettingsError(
+            f"unknown provider {provider!r} in the model string.{hint} Examples: {MODEL_EXAMPLES}"
+        )
+
+
+def _shares(total: int, parts: int) -> list[int]:
+    """``total`` split into ``parts`` integers that differ by at most one and sum to it."""
+    base, extra = divmod(total, parts)
+    return [base + (i < extra) for i in range(parts)]
+
+
+def _describe_error(error: Exception) -> str:
+    """The error's type and message, redacted and shortened."""
+    text = str(error)
+    if type(error).__name__ not in text:
+        text = f"{type(error).__name__}: {text}"
+    text = redact(" ".join(text.split()))
+    return text if len(text) <= _MAX_ERROR_CHARS else text[: _MAX_ERROR_CHARS - 1] + "…"

@@ -1,0 +1,52 @@
+"""Assembling a search from its config: task, proposer, sandbox pool, run store.
+
+Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from sga_agent import registry
+from sga_agent.config import SearchConfig
+from sga_agent.proposers.base import Proposer
+from sga_agent.run_store import RunStore
+from sga_agent.sandbox import SandboxLimits, SandboxPool
+from sga_agent.search import Search, SearchResult
+
+REPLAY_PREFIX = "replay:"
+
+
+def make_proposer(config: SearchConfig) -> Proposer | None:
+    """The model behind ``config.proposer``; None for a replay (answers come from a run)."""
+    if config.proposer.startswith(REPLAY_PREFIX):
+        return None
+    from sga_agent.proposers.litellm_backbone import BackboneSettings, LiteLLMProposer
+
+    return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
+
+
+def replayed_answers(config: SearchConfig) -> dict[str, dict[str, Any]]:
+    """Recorded model answers of the run named by a ``replay:RUN_DIR`` proposer."""
+    if not config.proposer.startswith(REPLAY_PREFIX):
+        return {}
+    source = RunStore.open(Path(config.proposer[len(REPLAY_PREFIX) :]))
+    return source.recorded().proposals
+
+
+def run(
+    config: SearchConfig,
+    store: RunStore,
+    on_event: Callable[[dict[str, Any]], None] | None = None,
+    proposer: Proposer | None = None,
+) -> SearchResult:
+    """Run (or continue) the search ``config`` describes, recording into ``store``."""
+    task = registry.load_task(config.task)
+    if proposer is None:
+        proposer = make_proposer(config)
+    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
+    with SandboxPool(max_workers=config.workers, limits=limits) as pool:
+        search = Search(config, task, proposer, pool, store, replayed_answers(config), on_event)
+        return search.run()

@@ -1,0 +1,287 @@
+"""The outer loop of the bilevel search (Algorithm 1 of the paper).
+
+Evaluate the task's seed; then, each iteration, show the model the top-K solutions (worst
+first, best last), ask for ``exploit`` offspring at the low temperature and ``explore`` at the
+high one, evaluate them in sandboxed workers (identical code once) and push them onto the
+heap. Every model answer and every finished evaluation is an event in the run store before
+anything else happens, and both are looked up there first, so a killed run resumes without
+asking the model again or re-evaluating what was finished.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from sga_agent.config import SearchConfig
+from sga_agent.fingerprint import fingerprint
+from sga_agent.heap import Entry, SolutionHeap
+from sga_agent.parsing import CodeRejected, check_code, parse_response
+from sga_agent.prompting import Shown, build_messages
+from sga_agent.proposers.base import Proposal, Proposer, ProposerError
+from sga_agent.run_store import RunStore
+from sga_agent.task import Evaluation, EvaluationSettings, Task
+
+SEED = "00-seed"
+
+
+class Evaluator(Protocol):
+    """Evaluates solutions of a task concurrently (the sandbox pool, or a test double)."""
+
+    def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
+        ...
+
+
+@dataclass
+class Totals:
+    """Tokens, money and evaluations spent so far."""
+
+    tokens: int = 0
+    cost_usd: float = 0.0
+    evaluations: int = 0
+    valid: int = 0
+    invalid: int = 0
+
+
+@dataclass
+class SearchResult:
+    """The heap, what was spent, and why the run ended."""
+
+    heap: SolutionHeap
+    totals: Totals
+    stopped: str = ""  # "" when every iteration ran, else the budget that stopped it
+    top: list[Entry] = field(default_factory=list)
+
+    @property
+    def best(self) -> Entry | None:
+        return self.heap.best()
+
+
+class Search:
+    """One run of the search; see the module docstring.
+
+    Parameters
+    ----------
+    config : SearchConfig
+    task : Task
+        The task object (only its kind, seed and prompt parts are used here; evaluation
+        happens in the evaluator's workers).
+    proposer : Proposer, optional
+        Asked for answers not recorded yet; None when every answer must come from
+        ``prerecorded`` (a replayed run).
+    evaluator : Evaluator
+    store : RunStore
+    prerecorded : dict, optional
+        Model answers by candidate id from another run (replay).
+    on_event : callable, optional
+        Called with every event (progress display).
+    """
+
+    def __init__(
+        self,
+        config: SearchConfig,
+        task: Task,
+        proposer: Proposer | None,
+        evaluator: Evaluator,
+        store: RunStore,
+        prerecorded: dict[str, dict[str, Any]] | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.task = task
+        self.proposer = proposer
+        self.evaluator = evaluator
+        self.store = store
+        self.on_event = on_event or (lambda event: None)
+        recorded = store.recorded()
+        self._answers = {**(prerecorded or {}), **recorded.proposals}
+        self._evaluations = recorded.evaluations
+        self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
+        self.heap = SolutionHeap()
+        self.totals = Totals()
+        self.settings = EvaluationSettings(
+            epochs=config.epochs if config.bilevel else 0,
+            learning_rate=config.learning_rate,
+            seed=config.seed,
+            options=dict(config.task_options),
+        )
+
+    # ------------------------------------------------------------------ the loop
+
+    def run(self) -> SearchResult:
+        self._emit({"type": "search_started", "resumed": bool(self._evaluations)})
+        self._evaluate_all([(SEED, self.task.seed_solution(), None)])
+        stopped = ""
+        for iteration in range(1, self.config.iterations + 1):
+            stopped = self._budget_exceeded()
+            if stopped:
+                break
+            shown = self.heap.top(self.config.top_k)
+            messages = build_messages(
+                self.task.kind,
+                self.task.prompt_parts(),
+                [Shown(entry.code, entry.feedback, entry.loss) for entry in shown],
+            )
+            answers = self._answers_for(iteration, messages)
+            stopped = self._evaluate_all(
+                [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
+            )
+            top = [entry.summary() for entry in self.heap.top(self.config.top_k)]
+            self.store.save_heap(iteration, top)
+            self._emit({"type": "iteration_done", "iteration": iteration, "top": top})
+            if stopped:
+                break
+        result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.config.top_k))
+        self.store.save_summary(self._summary(result))
+        self._emit({"type": "run_finished", "stopped": stopped})
+        return result
+
+    # ------------------------------------------------------------------ proposals
+
+    def _slots(self, iteration: int) -> list[tuple[str, float]]:
+        cfg = self.config
+        return [
+            (f"{iteration:02d}-exploit-{j:02d}", cfg.exploit_temperature)
+            for j in range(cfg.exploit)
+        ] + [
+            (f"{iteration:02d}-explore-{j:02d}", cfg.explore_temperature)
+            for j in range(cfg.explore)
+        ]
+
+    def _answers_for(self, iteration: int, messages) -> list[tuple[str, dict[str, Any]]]:
+        """(candidate, proposal dict) of every slot that has an answer, recorded or new."""
+        slots = self._slots(iteration)
+        missing: dict[float, list[str]] = {}
+        for candidate, temperature in slots:
+            if candidate not in self._answers:
+                missing.setdefault(temperature, []).append(candidate)
+        for temperature, candidates in missing.items():
+            if self._budget_exceeded():
+                break
+            new = self._ask(messages, temperature, len(candidates))
+            for candidate, proposal in zip(candidates, new, strict=False):
+                data = proposal.to_dict()
+                self._answers[candidate] = data
+                self.store.save_proposal(candidate, messages, data)
+                self._emit({"type": "proposal", "candidate": candidate, "proposal": data})
+            for candidate in candidates[len(new) :]:
+                self._emit({"type": "proposal_missing", "candidate": candidate})
+        answers = []
+        for candidate, _ in slots:
+            if candidate in self._answers:
+                data = self._answers[candidate]
+                self.totals.tokens += int(data.get("prompt_tokens", 0)) + int(
+                    data.get("completion_tokens", 0)
+                )
+                self.totals.cost_usd += float(data.get("cost_usd", 0.0))
+                answers.append((candidate, data))
+        return answers
+
+    def _ask(self, messages, temperature: float, n: int) -> list[Proposal]:
+        if self.proposer is None:
+            self._emit({"type": "proposer_error", "error": "the answer is not in the replayed "
+                        "run and no model is configured"})  # fmt: skip
+            return []
+        try:
+            return list(self.proposer.propose(messages, temperature, n))[:n]
+        except ProposerError as error:
+            self._emit({"type": "proposer_error", "error": str(error)})
+            return []
+
+    def _extract(self, proposal: dict[str, Any]) -> tuple[str, Evaluation | None]:
+        """The answer's code, and an invalid evaluation when it cannot be run."""
+        parsed = parse_response(proposal["text"])
+        if parsed.code is None:
+            reason = "the answer has no ```python code block; put the code in one block"
+            return proposal["text"], Evaluation.invalid(reason)
+        try:
+            check_code(parsed.code, self.task.kind)
+        except CodeRejected as error:
+            return parsed.code, Evaluation.invalid(f"the code was rejected before it ran: {error}")
+        return parsed.code, None
+
+    # ------------------------------------------------------------------ evaluations
+
+    def _evaluate_all(self, candidates: list[tuple[str, str, Evaluation | None]]) -> str:
+        """Evaluate (or look up) every candidate; returns the budget that stopped it, if any.
+
+        ``candidates`` are (id, code, rejection): a rejected one (no code, failed static
+        checks) is recorded as it is. The rest are submitted together and recorded in order;
+        one whose normalized code was seen before takes that evaluation instead.
+        """
+        submitted: dict[str, tuple[str, Future[Evaluation]]] = {}  # fingerprint -> first
+        order: list[tuple[str, str, str, Evaluation | None]] = []
+        stopped = ""
+        for candidate, code, rejection in candidates:
+            key = fingerprint(code)
+            known = candidate in self._evaluations or key in self._fingerprints
+            if rejection is None and not known and key not in submitted:
+                limit = self.config.max_evaluations
+                if limit is not None and self.totals.evaluations + len(submitted) >= limit:
+                    stopped = f"max_evaluations={limit} reached"
+                    break
+                future = self.evaluator.submit(self.config.task, code, self.settings)
+                submitted[key] = (candidate, future)
+            order.append((candidate, code, key, rejection))
+        for candidate, code, key, rejection in order:
+            if candidate in self._evaluations:  # finished before a resume
+                self._record(candidate, code, self._evaluations[candidate], stored=True)
+            elif rejection is not None:
+                self._record(candidate, code, rejection)
+            elif key in self._fingerprints:
+                first, evaluation = self._fingerprints[key]
+                copy = Evaluation.from_dict(evaluation.to_dict())
+                copy.extras["duplicate_of"] = first
+                self._record(candidate, code, copy)
+            else:
+                self._record(candidate, code, submitted[key][1].result())
+        return stopped
+
+    def _record(
+        self, candidate: str, code: str, evaluation: Evaluation, stored: bool = False
+    ) -> None:
+        """Push onto the heap; store the evaluation first (unless it came from the store)."""
+        self._fingerprints.setdefault(fingerprint(code), (candidate, evaluation))
+        if not stored:
+            self._evaluations[candidate] = evaluation
+            self.store.save_evaluation(candidate, code, evaluation)
+            self._emit({"type": "evaluation", "candidate": candidate,
+                        "evaluation": evaluation.to_dict()})  # fmt: skip
+        self.totals.evaluations += "duplicate_of" not in evaluation.extras
+        if evaluation.valid:
+            self.totals.valid += 1
+        else:
+            self.totals.invalid += 1
+        self.heap.push(candidate, code, evaluation.loss, evaluation.feedback, evaluation.valid)
+
+    # ------------------------------------------------------------------ bookkeeping
+
+    def _budget_exceeded(self) -> str:
+        cfg, totals = self.config, self.totals
+        if cfg.max_usd is not None and totals.cost_usd >= cfg.max_usd:
+            return f"max_usd={cfg.max_usd} reached"
+        if cfg.max_tokens is not None and totals.tokens >= cfg.max_tokens:
+            return f"max_tokens={cfg.max_tokens} reached"
+        if cfg.max_evaluations is not None and totals.evaluations >= cfg.max_evaluations:
+            return f"max_evaluations={cfg.max_evaluations} reached"
+        return ""
+
+    def _emit(self, event: dict[str, Any]) -> None:
+        self.store.append(event)
+        self.on_event({**event, "totals": self.totals})
+
+    def _summary(self, result: SearchResult) -> dict[str, Any]:
+        best = result.best
+        return {
+            "task": self.config.task,
+            "stopped": result.stopped,
+            "best": None if best is None else best.summary(),
+            "top": [entry.summary() for entry in result.top],
+            "tokens": result.totals.tokens,
+            "cost_usd": result.totals.cost_usd,
+            "evaluations": result.totals.evaluations,
+            "valid": result.totals.valid,
+            "invalid": result.totals.invalid,
+        }

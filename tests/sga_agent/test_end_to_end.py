@@ -1,0 +1,158 @@
+"""`sga-agent search` end to end: the real litellm client against a scripted local server,
+a real constitutive task in sandboxed workers, then `sga-agent resume` of a killed run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tests.sga_agent.openai_server import ScriptedOpenAIServer
+
+KEY = "sk-test-not-a-real-key-0123456789"
+LAWS = Path(__file__).resolve().parents[2] / "examples" / "laws"
+
+
+def answer(code: str) -> str:
+    plan = "### Analysis\nLooked at it.\n\n### Step-by-Step Plan\n1. Do it.\n\n"
+    return f"{plan}### Code\n```python\n{code}```\n"
+
+
+NEO_HOOKEAN = (LAWS / "neo_hookean.py").read_text()
+SOFTER = NEO_HOOKEAN.replace("log_youngs_modulus: float = 13.0", "log_youngs_modulus: float = 12.0")
+RAISES = """import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        return F @ F[:, :2]
+"""
+NAN = """import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        return F / (F - F)
+"""
+HOSTILE = """import os
+import torch.nn as nn
+
+os.system("touch /tmp/sga-hostile")
+
+
+class Physics(nn.Module):
+    def forward(self, F):
+        open("/tmp/sga-hostile", "w").write("x")
+        return F
+"""
+SCRIPT = [
+    [answer(NEO_HOOKEAN), answer(SOFTER)],  # exploit, n=2
+    ["I would rather not write code.", answer(RAISES), answer(NAN), answer(HOSTILE)],  # explore
+]
+EXPECTED = {
+    "00-seed": "ok",
+    "01-exploit-00": "ok",
+    "01-exploit-01": "ok",
+    "01-explore-00": "invalid",
+    "01-explore-01": "error",
+    "01-explore-02": "unstable",
+    "01-explore-03": "invalid",
+}
+
+
+def search_command(out: Path, *source: str) -> list[str]:
+    """A tiny search of the elastic task; ``source`` names the model (or the replayed run)."""
+    return [
+        sys.executable, "-m", "sga_agent", "search", "--task", "elastic", *source,
+        "--iterations", "1", "--exploit", "2", "--explore", "4", "--top-k", "3",
+        "--epochs", "1", "--option", "steps=100", "--workers", "2", "--timeout", "300",
+        "--out", str(out), "--json",
+    ]  # fmt: skip
+
+
+def model(url: str) -> tuple[str, ...]:
+    return ("--model", "openai/test-model", "--api-base", url)
+
+
+def environment() -> dict[str, str]:
+    return {**os.environ, "OPENAI_API_KEY": KEY}
+
+
+def test_search_end_to_end(tmp_path):
+    with ScriptedOpenAIServer(SCRIPT) as server:
+        run = subprocess.run(
+            search_command(tmp_path, *model(server.url)),
+            capture_output=True, text=True, timeout=900, env=environment(),
+        )  # fmt: skip
+        requests = server.requests
+    assert run.returncode == 0, run.stderr[-3000:]
+    summary = json.loads(run.stdout.strip().splitlines()[-1])
+    folder = Path(summary["run"])
+    assert [r["temperature"] for r in requests] == [0.5, 1.0]
+    assert [r.get("n") for r in requests] == [2, 4]
+    system, user = requests[0]["messages"]
+    assert system["role"] == "system" and "### Code" in user["content"]
+
+    statuses = {}
+    for candidate in EXPECTED:
+        evaluation = json.loads((folder / "candidates" / candidate / "evaluation.json").read_text())
+        statuses[candidate] = evaluation["status"]
+    assert statuses == EXPECTED
+    # ranking: the true law, then the softer one, then the linear seed; invalid ones last
+    ranked = [entry["candidate"] for entry in summary["top"]]
+    assert ranked == ["01-exploit-00", "01-exploit-01", "00-seed"]
+    assert not Path("/tmp/sga-hostile").exists()
+    for candidate in EXPECTED:
+        files = {p.name for p in (folder / "candidates" / candidate).iterdir()}
+        assert {"code.py", "evaluation.json", "feedback.txt", "curves.json"} <= files
+    for name in ("messages.json", "response.txt", "proposal.json"):
+        assert (folder / "candidates" / "01-explore-03" / name).is_file()
+    assert (folder / "heap" / "iteration-01.json").is_file()
+    assert (folder / "config.json").is_file() and (folder / "summary.json").is_file()
+    everything = "".join(p.read_text() for p in folder.rglob("*") if p.is_file())
+    assert KEY not in everything and KEY not in run.stderr
+
+
+def test_killed_search_resumes_to_the_same_heap(tmp_path):
+    """kill -9 during the evaluations of iteration 1, resume, compare with a replayed run."""
+    with ScriptedOpenAIServer(SCRIPT) as server:
+        process = subprocess.Popen(
+            search_command(tmp_path / "killed", *model(server.url)),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment(),
+            start_new_session=True,
+        )  # fmt: skip
+        events = None
+        deadline = time.time() + 600
+        while time.time() < deadline:
+            logs = list((tmp_path / "killed").glob("*/events.jsonl"))
+            if logs and logs[0].read_text().count('"type": "evaluation"') >= 2:
+                events = logs[0]
+                break
+            time.sleep(0.2)
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    assert events is not None, "the search never got to iteration 1"
+    folder = events.parent
+    assert not (folder / "summary.json").exists()
+
+    resumed = subprocess.run(
+        [sys.executable, "-m", "sga_agent", "resume", str(folder), "--json"],
+        capture_output=True, text=True, timeout=900, env=environment(),
+    )  # fmt: skip
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    after = json.loads(resumed.stdout.strip().splitlines()[-1])
+
+    replay = subprocess.run(
+        search_command(tmp_path / "replay", "--replay", str(folder)),
+        capture_output=True, text=True, timeout=900, env=environment(),
+    )  # fmt: skip
+    assert replay.returncode == 0, replay.stderr[-3000:]
+    replayed = json.loads(replay.stdout.strip().splitlines()[-1])
+    assert after["top"] == replayed["top"]
+    assert after["evaluations"] == replayed["evaluations"] == 7

@@ -1,0 +1,174 @@
+"""The search loop with test doubles for the model and the evaluator (no Taichi, no sandbox).
+
+The doubles: a scripted proposer, and an evaluator whose loss is the number a law's code
+returns, so the ranking is known in advance.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from concurrent.futures import Future
+
+import pytest
+
+from sga_agent.config import SearchConfig
+from sga_agent.proposers.base import Proposal, ProposerError
+from sga_agent.run_store import RunStore
+from sga_agent.search import Search
+from sga_agent.task import Evaluation, PromptParts
+
+LAW = """```python
+import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def __init__(self, scale: float = 1.0):
+        super().__init__()
+        self.scale = nn.Parameter(torch.tensor(scale))
+
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        return F * {value}  # loss {value}
+```"""
+
+
+class FakeTask:
+    name = "fake"
+    description = "a task whose loss is written in the code"
+    kind = "equation"
+
+    def seed_solution(self) -> str:
+        return LAW.format(value=100.0).strip("`").removeprefix("python\n")
+
+    def prompt_parts(self) -> PromptParts:
+        return PromptParts("a tester", "find a small number", "class Physics: ...", "rules")
+
+
+class LossInCode:
+    """Evaluator double: the loss is the number after 'loss' in the code; counts calls."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        self.calls.append(solution)
+        future: Future[Evaluation] = Future()
+        loss = float(re.search(r"loss ([-\d.e+]+)", solution).group(1))
+        future.set_result(Evaluation(True, loss, f"feedback for loss {loss}"))
+        return future
+
+
+class Scripted:
+    """Proposer double: answers from a list, in order; records temperatures."""
+
+    name = "scripted"
+
+    def __init__(self, answers: list[str]) -> None:
+        self.answers = list(answers)
+        self.temperatures: list[float] = []
+
+    def propose(self, messages, temperature, n):
+        self.temperatures += [temperature] * n
+        if not self.answers:
+            raise ProposerError("no more scripted answers")
+        taken, self.answers = self.answers[:n], self.answers[n:]
+        return [Proposal(text, "scripted", temperature, 10, 5, 0.001) for text in taken]
+
+
+def config(**overrides) -> SearchConfig:
+    values = {"task": "fake", "proposer": "scripted", "iterations": 2, "top_k": 2,
+              "exploit": 1, "explore": 2, "workers": 1}  # fmt: skip
+    values.update(overrides)
+    return SearchConfig(**values)
+
+
+def run(tmp_path, answers, **overrides):
+    cfg = config(**overrides)
+    store = RunStore.create(tmp_path, cfg, {})
+    evaluator = LossInCode()
+    proposer = Scripted(answers)
+    result = Search(cfg, FakeTask(), proposer, evaluator, store).run()
+    return result, store, evaluator, proposer
+
+
+def test_algorithm_ranks_dedupes_and_records(tmp_path):
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 5.0)] + [
+        "no code here",
+        "```python\nimport os\nos.system('ls')\n```",
+        LAW.format(value=1.0),
+    ]
+    result, store, evaluator, proposer = run(tmp_path, answers)
+    assert proposer.temperatures == [0.5, 1.0, 1.0, 0.5, 1.0, 1.0]
+    assert [round(e.loss, 3) for e in result.top] == [1.0, 3.0]
+    assert result.best.candidate == "02-explore-01"
+    # 100 (seed), 5, 3, 1 evaluated; the second 5.0 is a duplicate: not evaluated again
+    assert len(evaluator.calls) == 4
+    duplicate = json.loads((store.path / "candidates/01-explore-01/evaluation.json").read_text())
+    assert duplicate["extras"]["duplicate_of"] == "01-exploit-00"
+    rejected = json.loads((store.path / "candidates/02-exploit-00/evaluation.json").read_text())
+    assert rejected["status"] == "invalid" and "code block" in rejected["reason"]
+    hostile = json.loads((store.path / "candidates/02-explore-00/evaluation.json").read_text())
+    assert hostile["status"] == "invalid" and "os" in hostile["reason"]
+    for name in ("messages.json", "response.txt", "proposal.json", "code.py", "feedback.txt"):
+        assert (store.path / "candidates/01-exploit-00" / name).is_file()
+    assert (store.path / "heap/iteration-02.json").is_file()
+    summary = json.loads((store.path / "summary.json").read_text())
+    assert summary["best"]["candidate"] == "02-explore-01"
+    assert result.totals.tokens == 6 * 15 and result.totals.cost_usd == pytest.approx(0.006)
+
+
+def test_prompt_shows_top_k_worst_first(tmp_path):
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    result, store, *_ = run(tmp_path, answers)
+    messages = json.loads((store.path / "candidates/02-exploit-00/messages.json").read_text())
+    user = messages[-1]["content"]
+    assert user.index("loss 5.0") < user.index("loss 3.0")  # worst first, best last
+    assert "loss 7.0" not in user and "loss 100.0" not in user  # only the top 2
+
+
+def test_budget_stops_cleanly(tmp_path):
+    answers = [LAW.format(value=v) for v in range(10, 20)]
+    result, store, evaluator, _ = run(tmp_path, answers, max_evaluations=3)
+    assert result.stopped == "max_evaluations=3 reached"
+    assert len(evaluator.calls) == 3
+    assert json.loads((store.path / "summary.json").read_text())["stopped"] == result.stopped
+
+
+def test_resume_reuses_answers_and_evaluations(tmp_path):
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    full, full_store, *_ = run(tmp_path / "full", answers)
+    # a run killed after the fourth evaluation event: cut its log there
+    cfg = config()
+    store = RunStore.create(tmp_path / "killed", cfg, {})
+    lines = (full_store.path / "events.jsonl").read_text().splitlines()
+    evaluations = [i for i, line in enumerate(lines) if '"type": "evaluation"' in line]
+    kept = lines[1 : evaluations[3] + 1]
+    with open(store.path / "events.jsonl", "a") as log:
+        log.write("\n".join(kept) + "\n" + '{"type": "evaluation", "cand')  # torn last line
+    evaluator = LossInCode()
+    proposer = Scripted(answers[3:])  # only the second iteration is asked again
+    resumed = Search(cfg, FakeTask(), proposer, evaluator, store).run()
+    assert [(e.candidate, e.loss) for e in resumed.heap.top(10)] == [
+        (e.candidate, e.loss) for e in full.heap.top(10)
+    ]
+    assert len(evaluator.calls) == 3  # only the answers of iteration 2
+
+
+def test_replay_needs_no_model(tmp_path):
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    full, full_store, *_ = run(tmp_path / "full", answers)
+    cfg = config(proposer=f"replay:{full_store.path}")
+    store = RunStore.create(tmp_path / "replay", cfg, {})
+    recorded = full_store.recorded().proposals
+    replay = Search(cfg, FakeTask(), None, LossInCode(), store, prerecorded=recorded).run()
+    assert [(e.candidate, e.loss) for e in replay.heap.top(10)] == [
+        (e.candidate, e.loss) for e in full.heap.top(10)
+    ]
+
+
+def test_proposer_failure_is_recorded_not_raised(tmp_path):
+    result, store, *_ = run(tmp_path, [LAW.format(value=2.0)])
+    events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
+    assert any(event["type"] == "proposer_error" for event in events)
+    assert result.best.loss == 2.0
