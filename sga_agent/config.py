@@ -12,8 +12,13 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-#: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off.
+#: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off. All but
+#: "quick" are the columns of the paper's Table 1; "quick" is the default of the LLM-free
+#: built-in proposers: a short run (25 candidates, 5 inner epochs) that shows the pipeline.
 PRESETS: dict[str, dict[str, Any]] = {
+    "quick": {
+        "iterations": 4, "top_k": 5, "exploit": 2, "explore": 4, "bilevel": True, "epochs": 5,
+    },
     "sga": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": True},
     "no-bilevel": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": False},
     "no-exploit": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": True},

@@ -1,7 +1,7 @@
 """Fingerprints of candidate code: equal for candidates that differ only in form.
 
 Two candidates whose code has the same abstract syntax tree, once docstrings are dropped, behave
-the same, so the sandbox pool evaluates them once. Whitespace, comments, docstrings and the
+the same, so the search evaluates them once. Whitespace, comments, docstrings and the
 quoting style of strings do not change the fingerprint; names, literals and structure do.
 Text that does not parse (a broken proposal) is compared with its runs of whitespace collapsed
 instead. Comments being dropped, this assumes solutions are Python code, as the solutions of

@@ -5,6 +5,7 @@ Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python)
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -15,14 +16,31 @@ from sga_agent.proposers.base import Proposer
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool
 from sga_agent.search import Search, SearchResult
+from sga_agent.task import BuiltinProposer, Task
 
 REPLAY_PREFIX = "replay:"
+BUILTIN = "builtin"
 
 
-def make_proposer(config: SearchConfig) -> Proposer | None:
-    """The model behind ``config.proposer``; None for a replay (answers come from a run)."""
+class ProposerChoiceError(ValueError):
+    """The requested proposer does not exist for this task."""
+
+
+def make_proposer(config: SearchConfig, task: Task) -> Proposer | BuiltinProposer | None:
+    """The proposer ``config.proposer`` names: a litellm model, the task's built-in
+    (LLM-free) proposer ("builtin" or its name, e.g. "builtin:gp"), or None for a replay."""
     if config.proposer.startswith(REPLAY_PREFIX):
         return None
+    if config.proposer == BUILTIN or config.proposer.startswith(BUILTIN + ":"):
+        factory = getattr(task, "builtin_proposer", None)
+        if factory is None:
+            raise ProposerChoiceError(f"task {task.name!r} has no built-in proposer; use --model")
+        proposer = factory()
+        if config.proposer not in (BUILTIN, proposer.name):
+            raise ProposerChoiceError(
+                f"task {task.name!r} offers {proposer.name!r}, not {config.proposer!r}"
+            )
+        return proposer
     from sga_agent.proposers.litellm_backbone import BackboneSettings, LiteLLMProposer
 
     return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
@@ -40,13 +58,14 @@ def run(
     config: SearchConfig,
     store: RunStore,
     on_event: Callable[[dict[str, Any]], None] | None = None,
-    proposer: Proposer | None = None,
+    proposer: Proposer | BuiltinProposer | None = None,
 ) -> SearchResult:
     """Run (or continue) the search ``config`` describes, recording into ``store``."""
     task = registry.load_task(config.task)
-    if proposer is None:
-        proposer = make_proposer(config)
+    if proposer is None and not config.proposer.startswith(REPLAY_PREFIX):
+        proposer = make_proposer(config, task)
     limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
     with SandboxPool(max_workers=config.workers, limits=limits) as pool:
+        store.append({"type": "sandbox", "isolation": dataclasses.asdict(pool.isolation())})
         search = Search(config, task, proposer, pool, store, replayed_answers(config), on_event)
         return search.run()

@@ -22,7 +22,7 @@ from sga_agent.parsing import CodeRejected, check_code, parse_response
 from sga_agent.prompting import Shown, build_messages
 from sga_agent.proposers.base import Proposal, Proposer, ProposerError
 from sga_agent.run_store import RunStore
-from sga_agent.task import Evaluation, EvaluationSettings, Task
+from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, Parent, Task
 
 SEED = "00-seed"
 
@@ -68,8 +68,9 @@ class Search:
     task : Task
         The task object (only its kind, seed and prompt parts are used here; evaluation
         happens in the evaluator's workers).
-    proposer : Proposer, optional
-        Asked for answers not recorded yet; None when every answer must come from
+    proposer : Proposer or BuiltinProposer, optional
+        Asked for answers not recorded yet: a model (given the prompt) or a task's LLM-free
+        proposer (given the top-K parents); None when every answer must come from
         ``prerecorded`` (a replayed run).
     evaluator : Evaluator
     store : RunStore
@@ -83,7 +84,7 @@ class Search:
         self,
         config: SearchConfig,
         task: Task,
-        proposer: Proposer | None,
+        proposer: Proposer | BuiltinProposer | None,
         evaluator: Evaluator,
         store: RunStore,
         prerecorded: dict[str, dict[str, Any]] | None = None,
@@ -124,7 +125,8 @@ class Search:
                 self.task.prompt_parts(),
                 [Shown(entry.code, entry.feedback, entry.loss) for entry in shown],
             )
-            answers = self._answers_for(iteration, messages)
+            parents = [Parent(entry.code, entry.loss) for entry in shown]
+            answers = self._answers_for(iteration, messages, parents)
             stopped = self._evaluate_all(
                 [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
             )
@@ -150,7 +152,9 @@ class Search:
             for j in range(cfg.explore)
         ]
 
-    def _answers_for(self, iteration: int, messages) -> list[tuple[str, dict[str, Any]]]:
+    def _answers_for(
+        self, iteration: int, messages, parents: list[Parent]
+    ) -> list[tuple[str, dict[str, Any]]]:
         """(candidate, proposal dict) of every slot that has an answer, recorded or new."""
         slots = self._slots(iteration)
         missing: dict[float, list[str]] = {}
@@ -160,7 +164,8 @@ class Search:
         for temperature, candidates in missing.items():
             if self._budget_exceeded():
                 break
-            new = self._ask(messages, temperature, len(candidates))
+            seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
+            new = self._ask(messages, parents, temperature, len(candidates), seed)
             for candidate, proposal in zip(candidates, new, strict=False):
                 data = proposal.to_dict()
                 self._answers[candidate] = data
@@ -179,13 +184,17 @@ class Search:
                 answers.append((candidate, data))
         return answers
 
-    def _ask(self, messages, temperature: float, n: int) -> list[Proposal]:
-        if self.proposer is None:
+    def _ask(self, messages, parents, temperature: float, n: int, seed: int) -> list[Proposal]:
+        proposer = self.proposer
+        if proposer is None:
             self._emit({"type": "proposer_error", "error": "the answer is not in the replayed "
                         "run and no model is configured"})  # fmt: skip
             return []
         try:
-            return list(self.proposer.propose(messages, temperature, n))[:n]
+            if isinstance(proposer, BuiltinProposer):
+                texts = proposer.propose_from(parents, temperature, n, seed)
+                return [Proposal(text, proposer.name, temperature) for text in texts[:n]]
+            return list(proposer.propose(messages, temperature, n))[:n]
         except ProposerError as error:
             self._emit({"type": "proposer_error", "error": str(error)})
             return []

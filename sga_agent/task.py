@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
 
@@ -146,4 +147,31 @@ class Task(Protocol):
 
     def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
         """Run the inner optimization on ``solution``; never raises for a bad candidate."""
+        ...
+
+
+@dataclass(frozen=True)
+class Parent:
+    """An evaluated solution a built-in proposer may mutate or cross: its code and loss."""
+
+    code: str
+    loss: float
+
+
+@runtime_checkable
+class BuiltinProposer(Protocol):
+    """An LLM-free proposer a task may offer (``task.builtin_proposer()``).
+
+    It plays the model's part without a model: from the current top-K parents it writes ``n``
+    new solutions, each an answer text holding one ```python block. ``temperature`` is the
+    search's exploit (low) or explore (high) temperature: low means small changes to good
+    parents, high means bolder ones. Everything random derives from ``seed``, so a call with
+    the same arguments returns the same answers.
+    """
+
+    name: str
+
+    def propose_from(
+        self, parents: Sequence[Parent], temperature: float, n: int, seed: int
+    ) -> list[str]:
         ...

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from sga_agent.cli import main
-from sga_agent.cli.search import execute
+from sga_agent.cli.search import execute, make_proposer
 from sga_agent.run_store import RunStore, RunStoreError
 
 
@@ -25,5 +25,6 @@ def resume(run_dir: Path, as_json: bool) -> None:
         config = store.config()
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
+    proposer = make_proposer(config)
     store.append({"type": "resumed"})
-    execute(config, store, as_json)
+    execute(config, store, as_json, proposer)

@@ -47,13 +47,16 @@ def _check_task(ctx: click.Context, param: click.Parameter, name: str) -> str:
               help="Registered task (see `sga-agent tasks`).")
 @click.option("--model", metavar="PROVIDER/MODEL", envvar="SGA_MODEL",
               help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
-              "20240620, hosted_vllm/NAME; the key comes from the provider's environment "
-              "variable (OPENAI_API_KEY, ANTHROPIC_API_KEY, ...).")
+              "20240620, hosted_vllm/NAME (the key comes from the provider's environment "
+              "variable: OPENAI_API_KEY, ANTHROPIC_API_KEY, ...), or builtin (the task's "
+              "LLM-free proposer: builtin:gp for laws, builtin:ga for molecules). Default: "
+              "builtin.")
 @click.option("--api-base", metavar="URL", help="Base URL of an OpenAI-compatible server.")
 @click.option("--replay", type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="Re-run a recorded search: its model answers, no model call.")
-@click.option("--preset", type=click.Choice(list(PRESETS)), default="sga", show_default=True,
-              help="Settings of a column of the paper's Table 1 (overridden by the options).")
+@click.option("--preset", type=click.Choice(list(PRESETS)),
+              help="Settings of a column of the paper's Table 1, or quick (overridden by the "
+              "options). Default: sga with a model, quick with a built-in proposer.")
 @click.option("--iterations", type=click.IntRange(min=1), help="Outer iterations.")
 @click.option("--top-k", type=click.IntRange(min=1), help="Solutions shown per prompt (K).")
 @click.option("--exploit", type=click.IntRange(min=0), help="Offspring per iteration at T_l.")
@@ -92,12 +95,17 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
     """  # fmt: skip
     if model and replay:
         raise click.UsageError("give either --model or --replay, not both")
+    console = Console(stderr=True, highlight=False)
     if not model and not replay:
-        raise click.UsageError(
-            "no model: pass --model PROVIDER/MODEL (for example openai/gpt-4o with "
-            "OPENAI_API_KEY set) or --replay RUN_DIR"
+        model = runner.BUILTIN
+        console.print(
+            "no --model given: the task's built-in LLM-free proposer searches (preset quick); "
+            "pass --model PROVIDER/MODEL (e.g. openai/gpt-4o with OPENAI_API_KEY set) to "
+            "search with an LLM"
         )
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
+    if preset is None:
+        preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
     try:
         config = SearchConfig.from_preset(
             preset, proposer=proposer, api_base=api_base,
@@ -107,15 +115,24 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
             runner.replayed_answers(config)  # fail early on a bad folder
     except (ConfigError, RunStoreError) as error:
         raise click.UsageError(str(error)) from error
+    chosen = make_proposer(config)
     store = RunStore.create(out, config, {"proposer": proposer})
-    execute(config, store, as_json)
+    execute(config, store, as_json, chosen)
 
 
-def execute(config: SearchConfig, store: RunStore, as_json: bool) -> None:
+def make_proposer(config: SearchConfig):
+    """The run's proposer; a bad choice is a usage error."""
+    try:
+        return runner.make_proposer(config, registry.load_task(config.task))
+    except ValueError as error:  # unknown built-in, malformed model string
+        raise click.UsageError(str(error)) from error
+
+
+def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> None:
     """Run with a progress display, then print the result."""
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
         console.print(f"run folder: {store.path}")
     with SearchProgress(console, config) as progress:
-        result = runner.run(config, store, progress)
+        result = runner.run(config, store, progress, proposer)
     print_result(console, store, result, as_json)

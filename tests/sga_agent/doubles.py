@@ -1,8 +1,9 @@
 """Test doubles for the sandbox and the CLI: tasks that import nothing heavy.
 
 :class:`ExecTask` executes the candidate's text (as a real task would run a proposed law) and
-reports the names it defines, plus the worker's environment and working directory, so that the
-tests can see what the sandbox did.
+reports the names it defines (``loss``, ``parameters``, ``feedback`` and ``report``, any JSON
+value), plus the worker's environment and working directory, so that the tests can see what the
+sandbox did.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ class ExecTask:
                 "environ": dict(os.environ),
                 "cwd": os.getcwd(),
                 "settings": asdict(settings),
+                "report": namespace.get("report"),
             },
         )
 
