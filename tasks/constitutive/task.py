@@ -6,7 +6,7 @@ does (inside the sandbox worker).
 
 from __future__ import annotations
 
-from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
 from tasks.constitutive import prompt_text
 from tasks.constitutive.specs import SPECS, ConstitutiveSpec
 
@@ -43,6 +43,12 @@ class ConstitutiveTask:
         from tasks.constitutive.evaluation import evaluate
 
         return evaluate(self.spec, solution, settings)
+
+    def builtin_proposer(self) -> BuiltinProposer:
+        """Genetic programming over law code (no model needed)."""
+        from tasks.constitutive.gp import GeneticProgrammingProposer
+
+        return GeneticProgrammingProposer(self.spec.searched)
 
 
 class ElasticTask(ConstitutiveTask):

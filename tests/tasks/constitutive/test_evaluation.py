@@ -51,8 +51,7 @@ def _shifted(code: str, replacements: dict[str, float]) -> str:
     [
         ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}, 16,
          0.08),
-        ("plasticine", {"log_yield_stress": math.log(6e4)}, 10, 0.1),
-        ("fluid", {"fluidity": 0.5}, 12, 0.15),
+        ("plasticine", {"log_yield_stress": math.log(6e4)}, 7, 0.15),
     ],
 )  # fmt: skip
 def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epochs, learning_rate):

@@ -1,0 +1,11 @@
+"""Genetic programming over constitutive-law code: the LLM-free proposer of these tasks.
+
+``grammar`` holds the typed tensor building blocks, ``genome`` the expression trees built from
+them, ``variation`` the mutation and crossover operators, ``codegen`` the translation of a
+genome into a ``Physics`` module (and back, through a comment) and ``proposer`` the
+:class:`sga_agent.task.BuiltinProposer`. Pure Python: nothing here imports torch.
+"""
+
+from tasks.constitutive.gp.proposer import GeneticProgrammingProposer
+
+__all__ = ["GeneticProgrammingProposer"]

@@ -1,0 +1,177 @@
+"""The typed building blocks of the genetic-programming law search.
+
+Every expression has a value type, named for its shape in the generated code:
+
+- ``M``: a matrix per particle, (B, 3, 3): F, the identity, the rotation R of F, and what
+  transposes, sums, products, deviatoric and volumetric parts make of them;
+- ``P``: a principal vector per particle, (B, 3), along the singular directions of F: the
+  singular values, the Hencky strain (their logarithms) and what is built from them;
+- ``S``: a scalar per particle, (B, 1): J, log J, traces and norms of the other types.
+
+Parameter leaves (type ``K``, or ``W`` for a weight in (0, 1)) become ``nn.Parameter``s of the
+generated law. Each stores an unconstrained raw value behind a transform that keeps it of order
+one for the optimizer: ``log`` (the value is exp(raw): moduli, thresholds), ``sigmoid``
+(weights, ratios in (0, 1)), ``tanh`` (signed ratios in (-1, 1)) or ``linear`` (free
+coefficients).
+
+Operations lift principal vectors back to matrices in three ways, with U, Vh the singular
+vectors of F: ``frame`` (U diag(p) Vh, so ``frame(sigma)`` is F), ``from_strain``
+(U diag(exp(p)) Vh, so ``from_strain(eps)`` is F: the way a return mapping rebuilds the
+corrected F from a principal strain) and ``spatial`` (U diag(p) U^T, symmetric: the way an
+isotropic law writes a Kirchhoff stress).
+Templates use ``{0}``, ``{1}``, ... for the children's values; the generated code gives every
+operation its own variable, so children are always atomic expressions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+MATRIX, PRINCIPAL, SCALAR = "M", "P", "S"
+PARAM, WEIGHT = "K", "W"
+VALUE_TYPES = (MATRIX, PRINCIPAL, SCALAR)
+PARAM_TYPES = (PARAM, WEIGHT)
+SHAPES = {MATRIX: "(B, 3, 3)", PRINCIPAL: "(B, 3)", SCALAR: "(B, 1)"}
+KINDS = ("elastic", "plastic")
+
+
+@dataclass(frozen=True)
+class Op:
+    """An operation (or a terminal, without arguments) producing a value of type ``out``.
+
+    ``needs`` names the shared quantities of :data:`PRELUDE` the template refers to.
+    """
+
+    name: str
+    out: str
+    args: tuple[str, ...]
+    template: str
+    needs: tuple[str, ...] = ()
+
+    @property
+    def terminal(self) -> bool:
+        return not self.args
+
+
+#: Quantities computed once at the top of ``forward``, in this order, with what they need.
+PRELUDE: dict[str, tuple[str, tuple[str, ...]]] = {
+    "svd": ("U, sigma, Vh = torch.linalg.svd(F)  # (B, 3, 3), (B, 3), (B, 3, 3)", ()),
+    "eps": ("eps = torch.log(sigma.abs().clamp(min=1e-2))  # Hencky strain (B, 3)", ("svd",)),
+    "R": ("R = U @ Vh  # rotation of F (B, 3, 3)", ("svd",)),
+    "eye": ("eye = torch.eye(3, dtype=F.dtype).expand_as(F)  # (B, 3, 3)", ()),
+    "J": ("J = torch.linalg.det(F).unsqueeze(-1)  # (B, 1)", ()),
+    "log_J": ("log_J = torch.log(J.clamp(min=1e-6))  # (B, 1)", ("J",)),
+}
+
+_NORM = "torch.sqrt(({0} ** 2).sum(-1, keepdim=True) + 1e-12)"
+_MEAN_DIAGONAL = "{0}.diagonal(dim1=-2, dim2=-1).mean(-1).view(-1, 1, 1)"
+_FROM_STRAIN = "U @ torch.diag_embed(torch.exp({0}.clamp(min=-5.0, max=5.0))) @ Vh"
+_SPATIAL = "U @ torch.diag_embed({0}) @ U.transpose(-2, -1)"
+#: radial clamp: the vector scaled down to norm s where its norm exceeds s (a projection)
+_SHRINK = "{0} * ({1}.clamp(min=0.0) / " + _NORM + ").clamp(max=1.0)"
+
+
+def _arithmetic(t: str) -> list[Op]:
+    """Sums, differences, scaling by a parameter, blends and clamps of one value type."""
+    ops = [
+        Op("add", t, (t, t), "{0} + {1}"),
+        Op("sub", t, (t, t), "{0} - {1}"),
+        Op("scale", t, (PARAM, t), "{0} * {1}"),
+        Op("blend", t, (WEIGHT, t, t), "{1} + {0} * ({2} - {1})"),
+    ]
+    if t != MATRIX:
+        ops += [
+            Op("exp", t, (t,), "torch.exp({0}.clamp(max=5.0))"),
+            Op("pos", t, (t,), "torch.relu({0})"),
+            Op("neg", t, (t,), "{0}.clamp(max=0.0)"),
+        ]
+    return ops
+
+
+_OPS = [
+    Op("F", MATRIX, (), "F"),
+    Op("I", MATRIX, (), "eye", ("eye",)),
+    Op("R", MATRIX, (), "R", ("R",)),
+    *_arithmetic(MATRIX),
+    Op("T", MATRIX, (MATRIX,), "{0}.transpose(-2, -1)"),
+    Op("matmul", MATRIX, (MATRIX, MATRIX), "{0} @ {1}"),
+    Op("smul", MATRIX, (SCALAR, MATRIX), "{0}.unsqueeze(-1) * {1}"),
+    Op("dev", MATRIX, (MATRIX,), "{0} - " + _MEAN_DIAGONAL + " * eye", ("eye",)),
+    Op("vol", MATRIX, (MATRIX,), _MEAN_DIAGONAL + " * eye", ("eye",)),
+    Op("frame", MATRIX, (PRINCIPAL,), "U @ torch.diag_embed({0}) @ Vh", ("svd",)),
+    Op("from_strain", MATRIX, (PRINCIPAL,), _FROM_STRAIN, ("svd",)),
+    Op("spatial", MATRIX, (PRINCIPAL,), _SPATIAL, ("svd",)),
+    Op("sigma", PRINCIPAL, (), "sigma", ("svd",)),
+    Op("eps", PRINCIPAL, (), "eps", ("eps",)),
+    *_arithmetic(PRINCIPAL),
+    Op("smul", PRINCIPAL, (SCALAR, PRINCIPAL), "{0} * {1}"),
+    Op("dev", PRINCIPAL, (PRINCIPAL,), "{0} - {0}.mean(-1, keepdim=True)"),
+    Op("vol", PRINCIPAL, (PRINCIPAL,), "{0}.mean(-1, keepdim=True).expand_as({0})"),
+    Op("shrink", PRINCIPAL, (PRINCIPAL, SCALAR), _SHRINK),
+    Op("J", SCALAR, (), "J", ("J",)),
+    Op("log_J", SCALAR, (), "log_J", ("log_J",)),
+    Op("const", SCALAR, (PARAM,), "{0}.expand(F.shape[0], 1)"),
+    *_arithmetic(SCALAR),
+    Op("mul", SCALAR, (SCALAR, SCALAR), "{0} * {1}"),
+    Op("sum", SCALAR, (PRINCIPAL,), "{0}.sum(-1, keepdim=True)"),
+    Op("norm", SCALAR, (PRINCIPAL,), _NORM),
+    Op("trace", SCALAR, (MATRIX,), "{0}.diagonal(dim1=-2, dim2=-1).sum(-1, keepdim=True)"),
+]
+
+#: Operations by value type, then name.
+OPS: dict[str, dict[str, Op]] = {
+    t: {op.name: op for op in _OPS if op.out == t} for t in VALUE_TYPES
+}
+
+#: How often random generation picks an operation (default 1), per kind of law searched:
+#: principal-space stresses for elastic laws, strain corrections rebuilt into F for plastic ones.
+OP_WEIGHTS: dict[str, dict[tuple[str, str], float]] = {
+    "elastic": {(MATRIX, "spatial"): 2.0, (MATRIX, "frame"): 0.5, (MATRIX, "from_strain"): 0.3,
+                (MATRIX, "blend"): 0.5, (PRINCIPAL, "eps"): 2.0, (PRINCIPAL, "exp"): 0.5,
+                (PRINCIPAL, "shrink"): 0.5},
+    "plastic": {(MATRIX, "from_strain"): 4.0, (MATRIX, "frame"): 0.5, (MATRIX, "spatial"): 0.2,
+                (MATRIX, "matmul"): 0.5, (PRINCIPAL, "eps"): 2.0, (PRINCIPAL, "sigma"): 0.5,
+                (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5},
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Transform:
+    """How a parameter's raw value becomes its value, and where its raw value starts."""
+
+    prefix: str
+    template: str
+    meaning: str
+    initial: tuple[float, float]
+    spread: float  # standard deviation of a perturbation at temperature 1
+
+
+TRANSFORMS = {
+    "log": Transform("log_", "torch.exp(self.{})", "natural log of a positive coefficient",
+                     (-5.0, 1.0), 0.6),
+    "sigmoid": Transform("logit_", "torch.sigmoid(self.{})", "logit of a ratio in (0, 1)",
+                         (-2.0, 2.0), 0.6),
+    "tanh": Transform("atanh_", "torch.tanh(self.{})", "inverse tanh of a ratio in (-1, 1)",
+                      (-1.5, 1.5), 0.4),
+    "linear": Transform("", "self.{}", "a free coefficient", (-2.0, 2.0), 0.4),
+}  # fmt: skip
+#: Transforms of a ``K`` leaf and how often each is drawn; a ``W`` leaf is always a sigmoid.
+PARAM_TRANSFORMS = {"log": 0.35, "linear": 0.35, "tanh": 0.15, "sigmoid": 0.15}
+
+#: Raw starting range of each term's coefficient: the natural log of a modulus in Pa for
+#: elastic laws (soft solids, about 3e3 to 1e6 Pa), the logit of a correction's weight for
+#: plastic laws.
+TERM_INITIAL = {"elastic": (8.0, 14.0), "plastic": (-1.0, 3.0)}
+TERM_TRANSFORM = {"elastic": "log", "plastic": "sigmoid"}
+TERM_NAME = {"elastic": "modulus", "plastic": "weight"}
+
+
+def weight(kind: str, value_type: str, name: str) -> float:
+    """Weight of operation ``name`` of ``value_type`` in random generation for ``kind``."""
+    return OP_WEIGHTS[kind].get((value_type, name), 1.0)
+
+
+def alternatives(value_type: str, name: str) -> list[str]:
+    """Other operations of ``value_type`` with the same argument types as ``name``."""
+    args = OPS[value_type][name].args
+    return [op.name for op in OPS[value_type].values() if op.args == args and op.name != name]

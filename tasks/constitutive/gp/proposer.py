@@ -1,0 +1,140 @@
+"""The LLM-free proposer of the constitutive-law tasks: genetic programming over law code.
+
+Stateless: a parent's genome is read back from the comment its code carries, so a resumed run
+proposes exactly what the original would have. A parent without one (the task's seed law, code
+written by a model) stands in as the identity (plastic search) or a random law (elastic
+search), keeping its loss.
+
+Temperature sets the mix of operators: at the exploit temperature (0.5 and below) mostly small
+steps (perturbed starting values, a swapped operation, one term added or dropped) from parents
+chosen by large tournaments; at the explore temperature (1.0 and above) mostly subtree
+replacement, crossover and fresh random laws from parents chosen by pairs. In between, the
+weights are interpolated. Perturbations grow with temperature too.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from sga_agent.task import Parent
+from tasks.constitutive.gp import grammar
+from tasks.constitutive.gp.codegen import genome_from_code, law_code
+from tasks.constitutive.gp.genome import Genome, random_genome, to_json
+from tasks.constitutive.gp.variation import OPERATORS
+
+#: Operator weights at the exploit (low) and explore (high) temperature.
+EXPLOIT = {"perturb": 5.0, "swap_op": 2.0, "add_term": 1.0, "drop_term": 1.0,
+           "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
+EXPLORE = {"perturb": 1.0, "swap_op": 1.0, "add_term": 1.0, "drop_term": 0.5,
+           "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
+LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
+TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
+MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
+ATTEMPTS = 30  # tries for a child new to the parents and the batch
+DESCRIPTIONS = {
+    "perturb": "moved one starting value of",
+    "swap_op": "swapped one operation of",
+    "add_term": "added a random term to",
+    "drop_term": "dropped a term of",
+    "replace_subtree": "replaced a subtree of",
+    "crossover": "crossed over",
+    "fresh": "drew a new random law instead of varying",
+}
+
+
+@dataclass(frozen=True)
+class _Member:
+    genome: Genome
+    loss: float
+
+
+def exploration(temperature: float) -> float:
+    """0 at or below the exploit temperature, 1 at or above the explore one, linear between."""
+    return min(max((temperature - LOW) / (HIGH - LOW), 0.0), 1.0)
+
+
+def operator_weights(temperature: float) -> dict[str, float]:
+    x = exploration(temperature)
+    return {name: (1 - x) * EXPLOIT[name] + x * EXPLORE[name] for name in EXPLOIT}
+
+
+class GeneticProgrammingProposer:
+    """Writes new laws by mutating and crossing the genomes of the best parents.
+
+    Parameters
+    ----------
+    searched : {"elastic", "plastic"}
+        What the task's law maps: F to the Kirchhoff stress, or F to the corrected F.
+    """
+
+    name = "builtin:gp"
+
+    def __init__(self, searched: str) -> None:
+        if searched not in grammar.KINDS:
+            raise ValueError(f"searched must be 'elastic' or 'plastic', got {searched!r}")
+        self.searched = searched
+
+    def propose_from(
+        self, parents: Sequence[Parent], temperature: float, n: int, seed: int
+    ) -> list[str]:
+        """``n`` answers, each one generated law in a python block; same inputs, same answers."""
+        rng = random.Random(seed)
+        pool = [_Member(self._genome(p.code, rng), _loss(p.loss)) for p in parents]
+        if not pool:
+            pool = [_Member(self._genome("", rng), math.inf)]
+        seen = {to_json(member.genome) for member in pool}
+        answers = []
+        for _ in range(n):
+            child, note = self._child(rng, pool, temperature, seen)
+            seen.add(to_json(child))
+            answers.append(_answer(law_code(child), note))
+        return answers
+
+    def _genome(self, code: str, rng: random.Random) -> Genome:
+        genome = genome_from_code(code, self.searched)
+        if genome is not None:
+            return genome
+        if self.searched == "plastic":
+            return Genome("plastic")
+        return random_genome(rng, self.searched)
+
+    def _child(
+        self, rng: random.Random, pool: list[_Member], temperature: float, seen: set[str]
+    ) -> tuple[Genome, str]:
+        weights = operator_weights(temperature)
+        x = exploration(temperature)
+        size = round((1 - x) * TOURNAMENT[LOW] + x * TOURNAMENT[HIGH])
+        step = max(temperature, MIN_STEP_TEMPERATURE)
+        for _ in range(ATTEMPTS):
+            name = rng.choices(list(weights), list(weights.values()))[0]
+            first, second = _tournament(rng, pool, size), _tournament(rng, pool, size)
+            child = OPERATORS[name](rng, first.genome, second.genome, step)
+            if child is not None and to_json(child) not in seen:
+                losses = [first] if name != "crossover" else [first, second]
+                note = f"{DESCRIPTIONS[name]} the parent{'s' if len(losses) > 1 else ''} "
+                note += " and ".join(f"of loss {m.loss:.4g}" for m in losses)
+                return child, note
+        return random_genome(rng, self.searched), "drew a new random law"
+
+
+def _loss(value: float) -> float:
+    """A NaN loss ranks last, as inf (an invalid parent)."""
+    return math.inf if math.isnan(value) else value
+
+
+def _tournament(rng: random.Random, pool: list[_Member], size: int) -> _Member:
+    """The best of ``size`` members drawn without replacement (ties: the earlier one)."""
+    drawn = sorted(rng.sample(range(len(pool)), min(size, len(pool))))
+    return min((pool[i] for i in drawn), key=lambda member: member.loss)
+
+
+def _answer(code: str, note: str) -> str:
+    return (
+        "### Analysis\n"
+        f"Genetic programming over typed tensor blocks: {note}.\n\n"
+        "### Code\n"
+        f"```python\n{code}```\n"
+    )

@@ -1,0 +1,133 @@
+"""Variation operators: from one or two parent genomes to a child.
+
+Each operator takes the random stream, the parent, a second parent (used by crossover only),
+the temperature and returns the child, or None when it does not apply (no parameter to
+perturb, no term to drop) or the child would break the limits of :func:`genome.fits`.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable
+from dataclasses import replace
+
+from tasks.constitutive.gp import grammar
+from tasks.constitutive.gp.genome import (
+    MAX_DEPTH,
+    Genome,
+    Node,
+    fits,
+    graft_term,
+    params,
+    random_expr,
+    random_genome,
+    random_term,
+    sites,
+    with_term,
+)
+
+Operator = Callable[[random.Random, Genome, Genome, float], Genome | None]
+REPLACEMENT_DEPTH = 4  # depth budget of a subtree drawn to replace another
+ADOPTION = 0.3  # chance that crossover adopts a whole term of the other parent
+
+
+def _checked(genome: Genome) -> Genome | None:
+    return genome if fits(genome) else None
+
+
+def perturb(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """Move one parameter's starting value by a Gaussian step that grows with temperature."""
+    found = params(genome)
+    if not found:
+        return None
+    index, path, param = rng.choice(found)
+    step = rng.gauss(0.0, grammar.TRANSFORMS[param.transform].spread * temperature)
+    moved = replace(param, raw=round(param.raw + step, 4))
+    if path is None:
+        return with_term(genome, index, replace(genome.terms[index], coefficient=moved))
+    return graft_term(genome, index, path, moved)
+
+
+def swap_op(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """Replace one operation by another of the same signature (add <-> sub, dev <-> vol, ...)."""
+    choices = [
+        (i, site, names)
+        for i, term in enumerate(genome.terms)
+        for site in sites(term.expr)
+        if isinstance(site.expr, Node)
+        and (names := grammar.alternatives(site.value_type, site.expr.op))
+    ]
+    if not choices:
+        return None
+    index, site, names = rng.choice(choices)
+    assert isinstance(site.expr, Node)
+    swapped = Node(rng.choice(names), site.expr.children)
+    return _checked(graft_term(genome, index, site.path, swapped))
+
+
+def add_term(
+    rng: random.Random, genome: Genome, other: Genome, temperature: float
+) -> Genome | None:
+    """Append a random term."""
+    return _checked(replace(genome, terms=(*genome.terms, random_term(rng, genome.kind))))
+
+
+def drop_term(
+    rng: random.Random, genome: Genome, other: Genome, temperature: float
+) -> Genome | None:
+    """Remove one term."""
+    if not genome.terms:
+        return None
+    terms = list(genome.terms)
+    del terms[rng.randrange(len(terms))]
+    return _checked(replace(genome, terms=tuple(terms)))
+
+
+def replace_subtree(
+    rng: random.Random, genome: Genome, other: Genome, temperature: float
+) -> Genome | None:
+    """Replace a random subtree by a fresh random one of the same type."""
+    if not genome.terms:
+        return None
+    index = rng.randrange(len(genome.terms))
+    site = rng.choice(list(sites(genome.terms[index].expr)))
+    budget = min(REPLACEMENT_DEPTH, MAX_DEPTH - site.depth + 1)
+    new = random_expr(rng, site.value_type, budget, genome.kind)
+    return _checked(graft_term(genome, index, site.path, new))
+
+
+def crossover(
+    rng: random.Random, genome: Genome, other: Genome, temperature: float
+) -> Genome | None:
+    """Graft a subtree of ``other`` onto a site of the same type, or adopt one of its terms."""
+    if not other.terms:
+        return None
+    if not genome.terms or rng.random() < ADOPTION:
+        return _checked(replace(genome, terms=(*genome.terms, rng.choice(other.terms))))
+    index = rng.randrange(len(genome.terms))
+    site = rng.choice([s for s in sites(genome.terms[index].expr) if isinstance(s.expr, Node)])
+    donors = [
+        s.expr
+        for donor in other.terms
+        for s in sites(donor.expr)
+        if s.value_type == site.value_type
+    ]
+    if not donors:
+        return None
+    return _checked(graft_term(genome, index, site.path, rng.choice(donors)))
+
+
+def fresh(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """A new random genome (the parents are ignored)."""
+    return random_genome(rng, genome.kind)
+
+
+OPERATORS: dict[str, Operator] = {
+    "perturb": perturb,
+    "swap_op": swap_op,
+    "add_term": add_term,
+    "drop_term": drop_term,
+    "replace_subtree": replace_subtree,
+    "crossover": crossover,
+    "fresh": fresh,
+}
