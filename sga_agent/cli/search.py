@@ -95,13 +95,12 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
     """  # fmt: skip
     if model and replay:
         raise click.UsageError("give either --model or --replay, not both")
-    console = Console(stderr=True, highlight=False)
     if not model and not replay:
         model = runner.BUILTIN
-        console.print(
-            "no --model given: the task's built-in LLM-free proposer searches (preset quick); "
-            "pass --model PROVIDER/MODEL (e.g. openai/gpt-4o with OPENAI_API_KEY set) to "
-            "search with an LLM"
+        click.echo(
+            "no --model: the task's built-in LLM-free proposer searches (preset quick); "
+            "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
+            err=True,
         )
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
     if preset is None:
