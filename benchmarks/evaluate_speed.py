@@ -3,7 +3,8 @@
 Each task runs in a fresh process (so its peak memory is its own): the ground-truth law
 started 2x off is fitted for ``--epochs`` epochs (one epoch: the 1000-step teacher-forced
 forward pass and its segment-wise backward, with the torch law in the loop). Printed: the
-whole evaluation, the wall time per epoch, the peak resident memory, and the ratio to the
+whole evaluation, the wall time per epoch, the peak resident memory (and, as "base", the
+memory of the process once torch and Taichi are loaded and started), and the ratio to the
 per-epoch times the issue reports for the original authors' Warp + torch code on this
 machine (elastic 9-14 s, plasticine 17-23 s, about 2 GB). Usage::
 
@@ -42,6 +43,10 @@ def run_one(task: str, epochs: int, profile: bool) -> dict:
 
     torch.set_num_threads(1)
     evaluator = load_task(task)
+    from tasks.constitutive.evaluation import ensure_runtime
+
+    ensure_runtime("float32")
+    baseline_mb = _resident_mb()  # torch, Taichi and the project imported, Taichi started
     evaluator.evaluate(law_code(task), EvaluationSettings(epochs=0))  # compile, ground truth
     started = time.perf_counter()
     if profile:
@@ -66,7 +71,20 @@ def run_one(task: str, epochs: int, profile: bool) -> dict:
         "epoch_seconds": result.extras["epoch_seconds"][:-1],
         "loss": result.loss,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "baseline_mb": baseline_mb,
     }
+
+
+def _resident_mb() -> float:
+    """Current resident memory (Linux /proc; the peak so far elsewhere)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def main() -> None:
@@ -79,7 +97,7 @@ def main() -> None:
     if args.child:
         print(json.dumps(run_one(args.child, args.epochs, args.profile)))
         return
-    print(f"{'task':<11} {'epochs':>6} {'total s':>8} {'s/epoch':>8} {'peak MB':>8} "
+    print(f"{'task':<11} {'epochs':>6} {'total s':>8} {'s/epoch':>8} {'peak MB':>8} {'base MB':>8} "
           f"{'loss start -> end':>22} {'authors s/epoch':>16} {'speed-up':>9}")  # fmt: skip
     for task in args.tasks:
         command = [sys.executable, __file__, "--child", task, "--epochs", str(args.epochs)]
@@ -93,9 +111,10 @@ def main() -> None:
         low, high = AUTHORS_SECONDS_PER_EPOCH.get(task, (math.nan, math.nan))
         authors = f"{low:.0f}-{high:.0f}" if math.isfinite(low) else "n/a"
         speedup = f"{low / per_epoch:.1f}-{high / per_epoch:.1f}x" if math.isfinite(low) else ""
-        print(f"{task:<11} {row['epochs']:>6} {row['seconds']:8.1f} {per_epoch:8.2f} "
-              f"{row['peak_mb']:8.0f} {row['first_loss']:10.2e} -> {row['loss']:9.2e} "
-              f"{authors:>16} {speedup:>9}")  # fmt: skip
+        memory = f"{row['peak_mb']:8.0f} {row['baseline_mb']:8.0f}"
+        losses = f"{row['first_loss']:10.2e} -> {row['loss']:9.2e}"
+        print(f"{task:<11} {row['epochs']:>6} {row['seconds']:8.1f} {per_epoch:8.2f} {memory} "
+              f"{losses} {authors:>16} {speedup:>9}")  # fmt: skip
 
 
 if __name__ == "__main__":

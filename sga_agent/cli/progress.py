@@ -9,6 +9,7 @@ from typing import Any
 import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.syntax import Syntax
 from rich.table import Table
 
 from sga_agent.config import SearchConfig
@@ -70,12 +71,16 @@ def print_result(console: Console, store: RunStore, result: SearchResult, as_jso
     if as_json:
         click.echo(json.dumps(summary))
         return
-    table = Table("rank", "candidate", "loss", "code", title=f"top {len(result.top)}")
+    table = Table("rank", "candidate", "loss", title=f"top {len(result.top)}")
     for rank, entry in enumerate(result.top, 1):
-        code = store.path / "candidates" / entry.candidate / "code.py"
         loss = f"{entry.loss:.6g}" if math.isfinite(entry.loss) else "invalid"
-        table.add_row(str(rank), entry.candidate, loss, str(code))
+        table.add_row(str(rank), entry.candidate, loss)
     console.print(table)
+    best = result.best
+    if best is not None and best.valid:
+        path = store.path / "candidates" / best.candidate / "code.py"
+        console.print(f"best: {best.candidate}, loss {best.loss:.6g} ({path})")
+        console.print(Syntax(best.code, "python", theme="ansi_dark", word_wrap=True))
     totals = result.totals
     console.print(
         f"{totals.evaluations} evaluations ({totals.valid} valid, {totals.invalid} invalid), "
