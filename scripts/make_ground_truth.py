@@ -31,16 +31,17 @@ TRUTH_FILES = {
     "fluid": "fluid.py",
     "imaginary": "mixture.py",
 }
-#: Parameters of the ground-truth laws 2x off (nu halved: doubling it leaves (-1, 0.5)).
+#: Parameters of the ground-truth laws 2x off (nu halved: doubling it leaves (-1, 0.5); the
+#: mixture's weights halved or doubled but still summing to 1, as a mixture's do).
 TWICE_OFF = {
     "elastic": {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225},
     "plasticine": {"log_yield_stress": math.log(6e4)},
     "granular": {"log_friction_angle": math.log(50.0)},
     "fluid": {"fluidity": 0.5},
     "imaginary": {
-        "weight_von_mises": 1.0,
+        "weight_von_mises": 0.25,
         "weight_sand": 0.6,
-        "weight_fluid": 0.4,
+        "weight_fluid": 0.15,
         "log_yield_stress": math.log(6e4),
         "log_friction_angle": math.log(50.0),
     },
