@@ -1,8 +1,9 @@
-"""Torch autograd bridge to :mod:`taichi_mpm`.
+"""Torch in the loop of :mod:`taichi_mpm`.
 
-This package wraps the differentiable Taichi MPM simulator in ``torch.autograd.Function``
-objects so that simulation rollouts can sit inside a PyTorch computation graph: forward passes
-run the Taichi kernels, backward passes run Taichi's reverse-mode kernels and hand the gradients
-back to torch. It imports both ``taichi_mpm`` and ``torch``. It is being built; nothing is
-exported yet.
+:mod:`bridges.step` wraps one MPM step in a ``torch.autograd.Function`` (Taichi forward and
+reverse kernels), :mod:`bridges.rollout` strings steps with torch constitutive laws into
+trajectories whose loss is back-propagated segment by segment (teacher forcing or
+checkpoints), :mod:`bridges.linalg` gives 3x3 SVD/polar decompositions with stable gradients,
+and :mod:`bridges.laws` has taichi_mpm's built-in materials written in torch. Imports
+``taichi_mpm`` and ``torch``, never ``tasks`` or ``sga_agent``.
 """

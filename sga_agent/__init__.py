@@ -1,13 +1,14 @@
 """The LLM-driven bilevel search (SGA) and its command-line interface.
 
-The outer level asks a large language model to propose physics code (for example constitutive
-laws) from the prompt templates shipped as ``sga_agent.prompts``; the inner level fits the
-continuous parameters of each proposal by differentiable simulation through :mod:`bridges` and
-:mod:`taichi_mpm`, and the scores feed back into the next round of proposals.
+The outer level asks a proposer (a language model through litellm, or a task's LLM-free
+evolutionary proposer) for hypotheses from the prompt templates shipped as
+``sga_agent.prompts``; the inner level fits each proposal's continuous parameters by
+differentiable simulation inside a task plugin, and the scores feed back into the next prompt.
 
-So far it holds the task contract (:mod:`sga_agent.task`) and the plugin registry
-(:mod:`sga_agent.registry`), the sandbox that evaluates untrusted candidates in a limited worker
-process (:mod:`sga_agent.sandbox`, :mod:`sga_agent.worker`), the prompt templates
-(:mod:`sga_agent.resources`) and the ``sga-agent`` command line with its ``tasks`` and
-``evaluate`` commands (:mod:`sga_agent.cli`); the search loop itself is being built.
+Modules, one job each: :mod:`.task` (the task contract), :mod:`.registry` (plugins through
+entry points), :mod:`.prompting` and :mod:`.parsing` (prompts in, answers out, static checks),
+:mod:`.proposers` (litellm backbone), :mod:`.sandbox`, :mod:`.worker` and :mod:`.isolation`
+(evaluation in limited, isolated worker processes), :mod:`.fingerprint` (identical code is
+evaluated once), :mod:`.heap`, :mod:`.search` (Algorithm 1), :mod:`.config` (settings and
+presets), :mod:`.run_store` (the run folder), :mod:`.runner` and :mod:`.cli` (``sga-agent``).
 """
