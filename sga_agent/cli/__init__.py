@@ -1,6 +1,7 @@
 """Command line interface: ``sga-agent``.
 
-One module per command: :mod:`.tasks`, :mod:`.evaluate`, :mod:`.search`, :mod:`.resume`.
+One module per command: :mod:`.tasks`, :mod:`.evaluate`, :mod:`.search`, :mod:`.resume`,
+:mod:`.report`.
 """
 
 from __future__ import annotations
@@ -19,4 +20,4 @@ def main() -> None:
 
 
 # The commands register themselves on ``main`` when imported.
-from sga_agent.cli import evaluate, resume, search, tasks  # noqa: E402, F401
+from sga_agent.cli import evaluate, report, resume, search, tasks  # noqa: E402, F401
