@@ -1,0 +1,119 @@
+"""A run folder read back into plain records (no task imports, no simulator)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sga_agent.run_store import CONFIG, SUMMARY, RunStore
+
+
+@dataclass
+class Candidate:
+    """One evaluated candidate, from ``candidates/<id>/``."""
+
+    id: str
+    status: str
+    loss: float
+    reason: str = ""
+    parameters: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    code: str = ""
+    feedback: str = ""
+    curves: dict[str, list[float]] = field(default_factory=dict)
+
+    @property
+    def iteration(self) -> int:
+        """The search iteration, from the id's prefix (``00-seed`` is iteration 0)."""
+        return int(self.id.split("-", 1)[0])
+
+
+@dataclass
+class Run:
+    """What a report needs from a run folder."""
+
+    path: Path
+    config: dict[str, Any]
+    candidates: list[Candidate]
+    sandbox: dict[str, Any] | None = None
+    summary: dict[str, Any] | None = None
+    tokens: int = 0
+    cost_usd: float = 0.0
+
+    @property
+    def task(self) -> str:
+        return str(self.config.get("task", "?"))
+
+    @property
+    def iterations(self) -> list[int]:
+        """Iterations with at least one evaluated candidate, in order."""
+        return sorted({candidate.iteration for candidate in self.candidates})
+
+    def ranked(self) -> list[Candidate]:
+        """Scored candidates, best (lowest loss) first; duplicates are left out."""
+        scored = [
+            c for c in self.candidates
+            if c.status == "ok" and math.isfinite(c.loss) and "duplicate_of" not in c.extras
+        ]  # fmt: skip
+        return sorted(scored, key=lambda c: c.loss)
+
+    @property
+    def best(self) -> Candidate | None:
+        ranked = self.ranked()
+        return ranked[0] if ranked else None
+
+
+def _read_json(path: Path, default: Any) -> Any:
+    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else default
+
+
+def _read_text(path: Path) -> str:
+    return path.read_text(encoding="utf-8") if path.is_file() else ""
+
+
+def read_candidate(folder: Path) -> Candidate | None:
+    """The candidate in ``folder``, or None while it has no ``evaluation.json`` yet."""
+    evaluation = _read_json(folder / "evaluation.json", None)
+    if evaluation is None:
+        return None
+    return Candidate(
+        id=folder.name,
+        status=evaluation.get("status", "ok" if evaluation.get("valid") else "invalid"),
+        loss=float(evaluation.get("loss", math.inf)),
+        reason=evaluation.get("reason", ""),
+        parameters=evaluation.get("parameters", {}),
+        extras=evaluation.get("extras", {}),
+        code=_read_text(folder / "code.py"),
+        feedback=_read_text(folder / "feedback.txt"),
+        curves=_read_json(folder / "curves.json", {}),
+    )
+
+
+def read_run(path: Path) -> Run:
+    """Read the run folder at ``path``.
+
+    Raises
+    ------
+    sga_agent.run_store.RunStoreError
+        ``path`` is not a run folder.
+    """
+    store = RunStore.open(path)
+    folders = sorted((store.path / "candidates").glob("*/"))
+    candidates = [c for c in map(read_candidate, folders) if c is not None]
+    run = Run(
+        path=store.path,
+        config=_read_json(store.path / CONFIG, {}).get("config", {}),
+        candidates=candidates,
+        summary=_read_json(store.path / SUMMARY, None),
+    )
+    for event in store.events():
+        if event.get("type") == "sandbox":
+            run.sandbox = event.get("isolation")
+        elif event.get("type") == "proposal":
+            proposal = event.get("proposal", {})
+            run.tokens += proposal.get("prompt_tokens", 0) + proposal.get("completion_tokens", 0)
+            run.cost_usd += proposal.get("cost_usd", 0.0)
+    return run

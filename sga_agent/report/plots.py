@@ -1,0 +1,137 @@
+"""The search figures: best loss per iteration, outcomes per iteration, inner-loop curves.
+
+Figures are drawn on :class:`matplotlib.figure.Figure` objects (the Agg canvas, no pyplot state,
+no display) at a fixed size so that a paper can place them as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from matplotlib.figure import Figure
+
+from sga_agent.report.data import Candidate, Run
+from sga_agent.task import STATUSES
+
+DPI = 150
+FONT = {"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11, "legend.fontsize": 9}
+#: One colour per outcome, failures in warm colours.
+STATUS_COLOURS = dict(zip(STATUSES, (
+    "#2a9d8f", "#e9c46a", "#f4a261", "#e76f51", "#8d6e63", "#9c27b0", "#455a64",
+), strict=True))  # fmt: skip
+CURVES_WIDTH, CURVES_ROW_HEIGHT, MAX_PARAMETER_PANELS = 11.0, 2.6, 3
+
+
+def new_figure(width: float, height: float) -> Figure:
+    import matplotlib
+
+    matplotlib.rcParams.update(FONT)
+    return Figure(figsize=(width, height), dpi=DPI)
+
+
+def save(figure: Figure, path: Path) -> Path:
+    figure.tight_layout()
+    figure.savefig(path, dpi=DPI)
+    return path
+
+
+def outcome_counts(run: Run) -> dict[int, dict[str, int]]:
+    """For each iteration, how many candidates ended in each status."""
+    counts = {iteration: dict.fromkeys(STATUSES, 0) for iteration in run.iterations}
+    for candidate in run.candidates:
+        counts[candidate.iteration][candidate.status] += 1
+    return counts
+
+
+def best_per_iteration(run: Run) -> tuple[dict[int, float], dict[int, float]]:
+    """The best finite loss found in each iteration, and the best found so far."""
+    within: dict[int, float] = {}
+    for candidate in run.ranked():
+        within.setdefault(candidate.iteration, candidate.loss)
+    so_far, best = {}, math.inf
+    for iteration in run.iterations:
+        best = min(best, within.get(iteration, math.inf))
+        if math.isfinite(best):
+            so_far[iteration] = best
+    return dict(sorted(within.items())), so_far
+
+
+def plot_best_loss(run: Run, path: Path, loss_label: str) -> Path:
+    """Line plot of the best loss so far per iteration (log scale); the seed is iteration 0."""
+    within, so_far = best_per_iteration(run)
+    figure = new_figure(7.0, 4.0)
+    axes = figure.add_subplot()
+    axes.plot(list(so_far), list(so_far.values()), "-o", color="#264653", label="best so far")
+    axes.plot(list(within), list(within.values()), "x", color="#e76f51", markersize=9,
+              label="best of the iteration")  # fmt: skip
+    if all(value > 0 for value in within.values()):
+        axes.set_yscale("log")
+    axes.set_xticks(run.iterations)
+    axes.set_xlabel("iteration (0 = seed)")
+    axes.set_ylabel(loss_label)
+    axes.set_title(f"{run.task}: best loss per iteration")
+    axes.grid(True, which="both", alpha=0.3)
+    axes.legend()
+    return save(figure, path)
+
+
+def plot_outcomes(run: Run, path: Path) -> Path:
+    """Stacked bars: the candidates of each iteration by outcome."""
+    counts = outcome_counts(run)
+    iterations = list(counts)
+    figure = new_figure(7.0, 4.0)
+    axes = figure.add_subplot()
+    bottom = [0] * len(iterations)
+    for status in STATUSES:
+        heights = [counts[i][status] for i in iterations]
+        if any(heights):
+            axes.bar(iterations, heights, bottom=bottom, color=STATUS_COLOURS[status],
+                     label=status, width=0.7)  # fmt: skip
+            bottom = [b + h for b, h in zip(bottom, heights, strict=True)]
+    axes.set_xticks(iterations)
+    axes.set_xlabel("iteration (0 = seed)")
+    axes.set_ylabel("candidates (count)")
+    axes.yaxis.get_major_locator().set_params(integer=True)
+    axes.set_title(f"{run.task}: evaluation outcomes per iteration")
+    axes.legend(title="outcome", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return save(figure, path)
+
+
+def curves_size(candidates: list[Candidate]) -> tuple[float, float]:
+    """The inner-loop figure's size in inches for these candidates."""
+    return CURVES_WIDTH, CURVES_ROW_HEIGHT * max(1, len(candidates))
+
+
+def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Path:
+    """One row per candidate: its loss over epochs, then its first parameters over epochs."""
+    figure = new_figure(*curves_size(candidates))
+    columns = 1 + MAX_PARAMETER_PANELS
+    grid = figure.add_gridspec(max(1, len(candidates)), columns)
+    for row, candidate in enumerate(candidates):
+        losses = candidate.curves.get("loss", [])
+        axes = figure.add_subplot(grid[row, 0])
+        axes.plot(range(len(losses)), losses, "-o", markersize=3, color="#264653", label="loss")
+        if losses and min(losses) > 0:
+            axes.set_yscale("log")
+        axes.set_title(f"#{row + 1} {candidate.id}: loss", loc="left")
+        axes.set_ylabel(loss_label.split(" (")[0])
+        axes.set_xlabel("epoch")
+        names = [name for name in candidate.curves if name != "loss"]
+        for column, name in enumerate(names[:MAX_PARAMETER_PANELS], start=1):
+            values = candidate.curves[name]
+            axes = figure.add_subplot(grid[row, column])
+            axes.plot(range(len(values)), values, "-o", markersize=3, color="#2a9d8f")
+            axes.set_title(name, loc="left")
+            axes.set_xlabel("epoch")
+            axes.set_ylabel("value")
+        if not names:
+            axes = figure.add_subplot(grid[row, 1:])
+            axes.axis("off")
+            axes.text(0.02, 0.5, "no trainable parameters", va="center")
+    if not candidates:
+        figure.add_subplot().text(0.5, 0.5, "no scored candidate", ha="center")
+    hidden = any(len(c.curves) - 1 > MAX_PARAMETER_PANELS for c in candidates)
+    note = f" (first {MAX_PARAMETER_PANELS} parameters; all in curves.json)" if hidden else ""
+    figure.suptitle(f"Inner-loop optimisation of the top candidates{note}")
+    return save(figure, path)

@@ -1,0 +1,119 @@
+"""Writing a report's sections as Markdown and as static HTML (images are files next to it)."""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass
+class Text:
+    text: str
+
+
+@dataclass
+class Table:
+    header: list[str]
+    rows: list[list[str]]
+
+
+@dataclass
+class Image:
+    file: str
+    alt: str
+
+
+@dataclass
+class Code:
+    text: str
+    language: str = ""
+
+
+Block = Text | Table | Image | Code
+
+
+@dataclass
+class Section:
+    title: str
+    blocks: list[Block] = field(default_factory=list)
+
+
+def _fence(text: str) -> str:
+    longest = max((len(run) for run in text.split("\n") if set(run) == {"`"}), default=2)
+    return "`" * max(3, longest + 1)
+
+
+def markdown(title: str, sections: list[Section]) -> str:
+    """The report as Markdown."""
+    lines = [f"# {title}", ""]
+    for section in sections:
+        lines += [f"## {section.title}", ""]
+        for block in section.blocks:
+            if isinstance(block, Text):
+                lines += [block.text, ""]
+            elif isinstance(block, Table):
+                lines.append("| " + " | ".join(block.header) + " |")
+                lines.append("|" + "---|" * len(block.header))
+                lines += ["| " + " | ".join(row) + " |" for row in block.rows]
+                lines.append("")
+            elif isinstance(block, Image):
+                lines += [f"![{block.alt}]({block.file})", ""]
+            else:
+                fence = _fence(block.text)
+                lines += [f"{fence}{block.language}", block.text.rstrip("\n"), fence, ""]
+    return "\n".join(lines)
+
+
+STYLE = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
+pre{background:#f4f4f4;padding:1em;overflow-x:auto}img{max-width:100%}"""
+
+
+def _inline(text: str) -> str:
+    """Escape, then turn Markdown's `code` and **bold** into tags (all the report uses)."""
+    parts = html.escape(text).split("`")
+    out = "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(parts))
+    bold = out.split("**")
+    return "".join(f"<b>{p}</b>" if i % 2 else p for i, p in enumerate(bold))
+
+
+def to_html(title: str, sections: list[Section]) -> str:
+    """The report as one static HTML page."""
+    body = [f"<h1>{html.escape(title)}</h1>"]
+    for section in sections:
+        body.append(f"<h2>{html.escape(section.title)}</h2>")
+        for block in section.blocks:
+            if isinstance(block, Text):
+                items = block.text.split("\n")
+                if all(item.startswith("- ") for item in items):
+                    body.append("<ul>" + "".join(f"<li>{_inline(i[2:])}</li>" for i in items)
+                                + "</ul>")  # fmt: skip
+                else:
+                    body.append(f"<p>{_inline(block.text)}</p>")
+            elif isinstance(block, Table):
+                head = "".join(f"<th>{html.escape(cell)}</th>" for cell in block.header)
+                rows = "".join(
+                    "<tr>" + "".join(f"<td>{html.escape(cell)}</td>" for cell in row) + "</tr>"
+                    for row in block.rows
+                )
+                body.append(f"<table><tr>{head}</tr>{rows}</table>")
+            elif isinstance(block, Image):
+                body.append(f'<p><img src="{html.escape(block.file)}" '
+                            f'alt="{html.escape(block.alt)}"></p>')  # fmt: skip
+            else:
+                body.append(f"<pre><code>{html.escape(block.text)}</code></pre>")
+    return (
+        '<!DOCTYPE html>\n<html><head><meta charset="utf-8">'
+        f"<title>{html.escape(title)}</title><style>{STYLE}</style></head>\n<body>\n"
+        + "\n".join(body)
+        + "\n</body></html>\n"
+    )
+
+
+def write(folder: Path, title: str, sections: list[Section]) -> tuple[Path, Path]:
+    """Write ``report.md`` and ``report.html`` into ``folder``."""
+    md, page = folder / "report.md", folder / "report.html"
+    md.write_text(markdown(title, sections), encoding="utf-8")
+    page.write_text(to_html(title, sections), encoding="utf-8")
+    return md, page
