@@ -39,9 +39,9 @@ TWICE_OFF = {
     "granular": {"log_friction_angle": math.log(50.0)},
     "fluid": {"fluidity": 0.5},
     "imaginary": {
-        "weight_von_mises": 0.25,
-        "weight_sand": 0.6,
-        "weight_fluid": 0.15,
+        "log_weight_von_mises": math.log(0.25),
+        "log_weight_sand": math.log(0.6),
+        "log_weight_fluid": math.log(0.15),
         "log_yield_stress": math.log(6e4),
         "log_friction_angle": math.log(50.0),
     },

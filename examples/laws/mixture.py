@@ -17,25 +17,25 @@ LAM = E * NU / ((1 + NU) * (1 - 2 * NU))
 class Physics(nn.Module):
     def __init__(
         self,
-        weight_von_mises: float = 0.5,
-        weight_sand: float = 0.3,
-        weight_fluid: float = 0.2,
+        log_weight_von_mises: float = -0.6931471805599453,  # ln 0.5
+        log_weight_sand: float = -1.2039728043259361,  # ln 0.3
+        log_weight_fluid: float = -1.6094379124341003,  # ln 0.2
         log_yield_stress: float = 10.308952660644293,  # ln 3e4
         log_friction_angle: float = 3.2188758248682006,  # ln 25
     ):
-        """Mixture of three return mappings.
+        """Mixture of three return mappings; the weights are a softmax, so they sum to 1.
 
         Args:
-            weight_von_mises (float): weight of the von Mises correction.
-            weight_sand (float): weight of the Drucker-Prager correction.
-            weight_fluid (float): weight of the fluid (volumetric) correction.
+            log_weight_von_mises (float): log-weight of the von Mises correction.
+            log_weight_sand (float): log-weight of the Drucker-Prager correction.
+            log_weight_fluid (float): log-weight of the fluid (volumetric) correction.
             log_yield_stress (float): natural log of the von Mises yield stress in Pa.
             log_friction_angle (float): natural log of the sand friction angle in degrees.
         """
         super().__init__()
-        self.weight_von_mises = nn.Parameter(torch.tensor(weight_von_mises))
-        self.weight_sand = nn.Parameter(torch.tensor(weight_sand))
-        self.weight_fluid = nn.Parameter(torch.tensor(weight_fluid))
+        self.log_weight_von_mises = nn.Parameter(torch.tensor(log_weight_von_mises))
+        self.log_weight_sand = nn.Parameter(torch.tensor(log_weight_sand))
+        self.log_weight_fluid = nn.Parameter(torch.tensor(log_weight_fluid))
         self.log_yield_stress = nn.Parameter(torch.tensor(log_yield_stress))
         self.log_friction_angle = nn.Parameter(torch.tensor(log_friction_angle))
 
@@ -61,8 +61,12 @@ class Physics(nn.Module):
         J = torch.linalg.det(F).clamp(min=1e-6)  # (B,)
         eye = torch.eye(3, dtype=F.dtype).expand_as(F)  # (B, 3, 3)
         fluid = J.pow(1 / 3).view(-1, 1, 1) * eye  # (B, 3, 3)
+        weights = torch.softmax(
+            torch.stack([self.log_weight_von_mises, self.log_weight_sand, self.log_weight_fluid]),
+            dim=0,
+        )  # (3,)
         return (
-            self.weight_von_mises * (U @ torch.diag_embed(von_mises) @ Vh)
-            + self.weight_sand * (U @ torch.diag_embed(sand) @ Vh)
-            + self.weight_fluid * fluid
+            weights[0] * (U @ torch.diag_embed(von_mises) @ Vh)
+            + weights[1] * (U @ torch.diag_embed(sand) @ Vh)
+            + weights[2] * fluid
         )  # (B, 3, 3)
