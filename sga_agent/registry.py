@@ -34,15 +34,13 @@ def task_names() -> list[str]:
     return sorted(task_entry_points())
 
 
-def load_task(name: str) -> Task:
-    """Instantiate the task registered as ``name``.
+def entry_point(name: str) -> EntryPoint:
+    """The entry point registered as ``name`` (nothing imported).
 
     Raises
     ------
     UnknownTaskError
         No such task; the message lists the registered ones and the closest match.
-    TypeError
-        The entry point does not produce a :class:`Task`.
     """
     points = task_entry_points()
     if name not in points:
@@ -53,10 +51,24 @@ def load_task(name: str) -> Task:
             f"no task named {name!r} is registered (known: {known}).{hint} "
             f"Tasks register through the {GROUP!r} entry-point group; see `sga-agent tasks`."
         )
-    task = points[name].load()()
+    return points[name]
+
+
+def load_task(name: str) -> Task:
+    """Instantiate the task registered as ``name``.
+
+    Raises
+    ------
+    UnknownTaskError
+        No such task; the message lists the registered ones and the closest match.
+    TypeError
+        The entry point does not produce a :class:`Task`.
+    """
+    point = entry_point(name)
+    task = point.load()()
     if not isinstance(task, Task):
         raise TypeError(
-            f"entry point {name!r} ({points[name].value}) returned {type(task).__name__}, which "
+            f"entry point {name!r} ({point.value}) returned {type(task).__name__}, which "
             "does not satisfy sga_agent.task.Task (name, description, kind, seed_solution, "
             "prompt_parts, evaluate)"
         )

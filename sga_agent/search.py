@@ -220,7 +220,7 @@ class Search:
         checks) is recorded as it is. The rest are submitted together and recorded in order;
         one whose normalized code was seen before takes that evaluation instead.
         """
-        submitted: dict[str, tuple[str, Future[Evaluation]]] = {}  # fingerprint -> first
+        submitted: dict[str, Future[Evaluation]] = {}  # by fingerprint
         order: list[tuple[str, str, str, Evaluation | None]] = []
         stopped = ""
         for candidate, code, rejection in candidates:
@@ -232,27 +232,30 @@ class Search:
                     stopped = f"max_evaluations={limit} reached"
                     break
                 future = self.evaluator.submit(self.config.task, code, self.settings)
-                submitted[key] = (candidate, future)
+                submitted[key] = future
             order.append((candidate, code, key, rejection))
         for candidate, code, key, rejection in order:
             if candidate in self._evaluations:  # finished before a resume
-                self._record(candidate, code, self._evaluations[candidate], stored=True)
+                self._record(candidate, code, key, self._evaluations[candidate], stored=True)
             elif rejection is not None:
-                self._record(candidate, code, rejection)
+                self._record(candidate, code, key, rejection)
             elif key in self._fingerprints:
                 first, evaluation = self._fingerprints[key]
                 copy = Evaluation.from_dict(evaluation.to_dict())
                 copy.extras["duplicate_of"] = first
-                self._record(candidate, code, copy)
+                self._record(candidate, code, key, copy)
             else:
-                self._record(candidate, code, submitted[key][1].result())
+                self._record(candidate, code, key, submitted[key].result())
         return stopped
 
     def _record(
-        self, candidate: str, code: str, evaluation: Evaluation, stored: bool = False
+        self, candidate: str, code: str, key: str, evaluation: Evaluation, stored: bool = False
     ) -> None:
-        """Push onto the heap; store the evaluation first (unless it came from the store)."""
-        self._fingerprints.setdefault(fingerprint(code), (candidate, evaluation))
+        """Push onto the heap; store the evaluation first (unless it came from the store).
+
+        ``key`` is the code's fingerprint: later identical code takes this evaluation.
+        """
+        self._fingerprints.setdefault(key, (candidate, evaluation))
         if not stored:
             self._evaluations[candidate] = evaluation
             self.store.save_evaluation(candidate, code, evaluation)

@@ -11,8 +11,8 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from sga_agent import registry
 from sga_agent.cli import main
+from sga_agent.cli.options import task_or_factory
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
 from sga_agent.task import Evaluation, EvaluationSettings
 
@@ -26,24 +26,13 @@ def extract_solution(text: str) -> str:
     return blocks[-1] if blocks else text
 
 
-def _check_task(ctx: click.Context, param: click.Parameter, name: str) -> str:
-    """Reject an unregistered name early, with the registry's "did you mean" message."""
-    if ":" in name or name in registry.task_entry_points():
-        return name
-    try:
-        registry.load_task(name)  # raises UnknownTaskError, nothing is loaded
-    except registry.UnknownTaskError as error:
-        raise click.BadParameter(str(error), ctx=ctx, param=param) from error
-    return name
-
-
 @main.command()
 @click.option(
     "--task",
     "task_name",
     required=True,
     metavar="NAME",
-    callback=_check_task,
+    callback=task_or_factory,
     help="A registered task (see `sga-agent tasks`), or module:callable, a factory of a task "
     "under development, imported from the current directory.",
 )

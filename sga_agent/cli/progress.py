@@ -45,8 +45,7 @@ class SearchProgress:
         totals = event["totals"]
         kind = event["type"]
         if kind == "evaluation":
-            loss = event["evaluation"]["loss"]
-            loss = float(loss)
+            loss = float(event["evaluation"]["loss"])  # "inf" for invalid candidates
             self.best = min(self.best, loss)
             self.progress.advance(self.bar)
         elif kind == "iteration_done":

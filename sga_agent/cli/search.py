@@ -11,6 +11,7 @@ from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
+from sga_agent.cli.options import registered_task
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import PRESETS, ConfigError, SearchConfig
 from sga_agent.run_store import RunStore, RunStoreError
@@ -33,17 +34,8 @@ def _task_options(ctx: click.Context, param: click.Parameter, values: tuple[str,
     return options
 
 
-def _check_task(ctx: click.Context, param: click.Parameter, name: str) -> str:
-    if name not in registry.task_entry_points():
-        try:
-            registry.load_task(name)
-        except registry.UnknownTaskError as error:
-            raise click.BadParameter(str(error), ctx, param) from error
-    return name
-
-
 @main.command()
-@click.option("--task", "task", required=True, callback=_check_task, metavar="NAME",
+@click.option("--task", "task", required=True, callback=registered_task, metavar="NAME",
               help="Registered task (see `sga-agent tasks`).")
 @click.option("--model", metavar="PROVIDER/MODEL", envvar="SGA_MODEL",
               help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
