@@ -3,8 +3,9 @@
 For each task it also scores, without fitting, the task's seed law and the ground-truth law
 written in torch (``examples/laws``): the seed must score clearly worse than the truth, which
 scores at float32 noise level. With ``--fit`` it then starts the ground-truth law with its
-parameters 2x off and runs the task's inner optimization (paper settings: Adam, learning rate
-3e-2, 30 epochs), reporting the loss before and after. Usage::
+parameters 2x off and runs the task's inner optimization (the paper's Adam, learning rate 3e-2,
+30 epochs; L-BFGS with 31 evaluations for `imaginary`), reporting the loss before and after.
+Usage::
 
     python scripts/make_ground_truth.py [--tasks elastic plasticine ...] [--steps 1000] [--fit]
 """

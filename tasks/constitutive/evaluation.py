@@ -47,8 +47,8 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
 def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) -> Evaluation:
     """Fit the law in ``code`` to the task's observation; invalid results carry a reason.
 
-    ``settings.options`` may hold ``precision`` ("float32" default, "float64") and ``steps``
-    (a shorter scene, for quick checks).
+    ``settings.options`` may hold ``precision`` ("float32" default, "float64"), ``steps``
+    (a shorter scene, for quick checks) and ``optimizer`` ("adam" default, "lbfgs").
     """
     started = time.perf_counter()
     ensure_runtime(settings.options.get("precision", "float32"))
@@ -67,6 +67,7 @@ def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) ->
         epochs=spec.epochs if settings.epochs is None else settings.epochs,
         learning_rate=settings.learning_rate or spec.learning_rate,
         reset_every=spec.reset_every,
+        optimizer=settings.options.get("optimizer", spec.optimizer),
     )
     try:
         result = optimize(rollout, law, observed, inner)
@@ -87,7 +88,7 @@ def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) ->
     corners = feedback.corner_particles(observed.positions[0])
     text = "\n\n".join(
         [
-            feedback.optimization_text(result, inner.learning_rate),
+            feedback.optimization_text(result, inner),
             feedback.trajectory_text(result.positions, observed.positions, scene.dt, corners),
         ]
     )

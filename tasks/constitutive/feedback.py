@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tasks.constitutive.inner import InnerResult
+from tasks.constitutive.inner import InnerResult, InnerSettings
 
 CURVE_POINTS = 10  # values listed per curve
 TRAJECTORY_FRAMES = 10
@@ -36,7 +36,7 @@ def _curve(values: list[float]) -> str:
     return ", ".join(f"{i}: {value:.4g}" for i, value in _sampled(values))
 
 
-def optimization_text(result: InnerResult, learning_rate: float) -> str:
+def optimization_text(result: InnerResult, settings: InnerSettings) -> str:
     """Loss and parameter curves with their best values."""
     epochs = len(result.losses)
     lines = []
@@ -47,8 +47,8 @@ def optimization_text(result: InnerResult, learning_rate: float) -> str:
         )
     else:
         lines += [
-            f"Inner optimization: Adam (learning rate {learning_rate:g}) over {epochs} "
-            "evaluations of the whole trajectory.",
+            f"Inner optimization: {_optimizer(settings)} over {epochs} evaluations of the "
+            "whole trajectory.",
             f"Loss (mean squared position error over all steps, m^2), by epoch: "
             f"{_curve(result.losses)}",
             f"Best loss {result.best_loss:.6g} at epoch {result.best_epoch}.",
@@ -57,9 +57,20 @@ def optimization_text(result: InnerResult, learning_rate: float) -> str:
         best = result.best_parameters
         for name, values in result.parameters.items():
             lines.append(f"- {name}: {_curve(values)}; best {best[name]:.6g}")
+    if result.rejected_trials:
+        lines.append(
+            f"{len(result.rejected_trials)} trial points of the line search were rejected (not "
+            f"among the epochs above), the first at {result.rejected_trials[0]}."
+        )
     if result.stopped:
         lines.append(f"The optimization stopped early at {result.stopped}.")
     return "\n".join(lines)
+
+
+def _optimizer(settings: InnerSettings) -> str:
+    if settings.optimizer == "lbfgs":
+        return "L-BFGS with a line search (several evaluations may share one step)"
+    return f"Adam (learning rate {settings.learning_rate:g})"
 
 
 def trajectory_text(
@@ -74,9 +85,7 @@ def trajectory_text(
         lines.append(f"Particle {number} (starts at {_xyz(start)}):")
         for frame in frames:
             sim, obs = predicted[frame, particle], observed[frame, particle]
-            lines.append(
-                f"  t = {frame * dt:.3f} s: simulated {_xyz(sim)}, observed {_xyz(obs)}"
-            )
+            lines.append(f"  t = {frame * dt:.3f} s: simulated {_xyz(sim)}, observed {_xyz(obs)}")
     return "\n".join(lines)
 
 

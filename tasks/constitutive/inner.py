@@ -8,6 +8,7 @@ with its reason; what was found before it stands.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import time
@@ -20,15 +21,30 @@ from torch import nn
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from tasks.constitutive.ground_truth import Trajectory
 
+#: Inner optimizers: ``InnerSettings.optimizer``.
+OPTIMIZERS = ("adam", "lbfgs")
+
 
 @dataclass(frozen=True)
 class InnerSettings:
-    """Paper defaults: Adam, learning rate 3e-2, 30 epochs, gradient norm clipped to 1."""
+    """Paper defaults: Adam, learning rate 3e-2, 30 epochs, gradient norm clipped to 1.
+
+    ``optimizer="lbfgs"`` uses L-BFGS with a strong-Wolfe line search instead: every epoch is
+    one loss-and-gradient evaluation (a line search may take several), ``learning_rate`` is its
+    first trial step and ``clip_norm`` is unused.
+    """
 
     epochs: int = 30
     learning_rate: float = 3e-2
     clip_norm: float = 1.0
     reset_every: int = 100
+    optimizer: str = "adam"
+
+    def __post_init__(self) -> None:
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(
+                f"unknown inner optimizer {self.optimizer!r}; choose one of {', '.join(OPTIMIZERS)}"
+            )
 
 
 @dataclass
@@ -42,6 +58,7 @@ class InnerResult:
     positions: np.ndarray | None = None  # predicted positions at the best epoch
     seconds: list[float] = field(default_factory=list)  # wall time of each epoch
     stopped: str = ""  # why the optimization ended early ("" when it ran every epoch)
+    rejected_trials: list[str] = field(default_factory=list)  # L-BFGS trial points that failed
 
     @property
     def best_parameters(self) -> dict[str, float]:
@@ -71,8 +88,9 @@ def optimize(
 ) -> InnerResult:
     """Fit ``law`` (one of ``rollout``'s laws) to ``observed``; leaves the best values in it.
 
-    ``settings.epochs`` gradient steps are taken and the parameters after the last one are
-    scored too; a law without trainable parameters is scored once.
+    Adam takes ``settings.epochs`` gradient steps and the parameters after the last one are
+    scored too; L-BFGS gets ``settings.epochs + 1`` evaluations. A law without trainable
+    parameters is scored once.
 
     Raises
     ------
@@ -80,43 +98,120 @@ def optimize(
         The starting parameters already make the simulation non-finite.
     """
     trainable = [p for p in law.parameters() if p.requires_grad]
-    optimizer = torch.optim.Adam(trainable, lr=settings.learning_rate) if trainable else None
-    epochs = settings.epochs if trainable else 0
-    result = InnerResult(parameters={name: [] for name in scalar_parameters(law)})
-    best_state = copy.deepcopy(law.state_dict())
-    for epoch in range(epochs + 1):
-        last = epoch == epochs
+    fit = _Fit(rollout, law, observed, settings)
+    if not trainable or settings.epochs == 0:
+        fit.score(backward=False)
+    elif settings.optimizer == "lbfgs":
+        _lbfgs(fit, trainable, settings.epochs + 1)
+    else:
+        _adam(fit, trainable, settings)
+    if fit.result.best_epoch < 0:
+        raise NoFiniteEpoch(fit.result.stopped or "no epoch gave a finite loss")
+    law.load_state_dict(fit.best_state)
+    return fit.result
+
+
+class _Fit:
+    """Scores the law's current parameters, one epoch each, and remembers the best."""
+
+    def __init__(
+        self, rollout: Rollout, law: nn.Module, observed: Trajectory, settings: InnerSettings
+    ) -> None:
+        self.rollout, self.law, self.observed, self.settings = rollout, law, observed, settings
+        self.result = InnerResult(parameters={name: [] for name in scalar_parameters(law)})
+        self.best_state = copy.deepcopy(law.state_dict())
+
+    @property
+    def epochs_done(self) -> int:
+        return len(self.result.losses)
+
+    def score(self, backward: bool) -> float | None:
+        """The loss (gradients in ``.grad`` if ``backward``); None, with the reason recorded
+        in ``result.stopped``, when the simulation or the gradient is not finite."""
         started = time.perf_counter()
-        if optimizer is not None:
-            optimizer.zero_grad(set_to_none=True)
+        epoch = self.epochs_done
         try:
             run = trajectory_loss(
-                rollout, observed.positions, observed.states, settings.reset_every,
-                backward=not last,
+                self.rollout, self.observed.positions, self.observed.states,
+                self.settings.reset_every, backward=backward,
             )  # fmt: skip
         except UnstableSimulation as error:
-            result.stopped = f"epoch {epoch}: {error}"
-            break
+            self.result.stopped = f"epoch {epoch}: {error}"
+            return None
+        result = self.result
         result.losses.append(run.loss)
-        for name, value in scalar_parameters(law).items():
+        for name, value in scalar_parameters(self.law).items():
             result.parameters[name].append(value)
         if run.loss < result.best_loss:
             result.best_epoch, result.best_loss, result.positions = epoch, run.loss, run.positions
-            best_state = copy.deepcopy(law.state_dict())
-        if last:
-            result.seconds.append(time.perf_counter() - started)
-            break
-        bad = _non_finite_gradient(law)
+            self.best_state = copy.deepcopy(self.law.state_dict())
+        result.seconds.append(time.perf_counter() - started)
+        bad = _non_finite_gradient(self.law) if backward else ""
         if bad:
             result.stopped = f"epoch {epoch}: the gradient of {bad} is not finite"
-            break
+            return None
+        return run.loss
+
+
+def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> None:
+    optimizer = torch.optim.Adam(trainable, lr=settings.learning_rate)
+    for epoch in range(settings.epochs + 1):
+        last = epoch == settings.epochs
+        optimizer.zero_grad(set_to_none=True)
+        if fit.score(backward=not last) is None or last:
+            return
         torch.nn.utils.clip_grad_norm_(trainable, settings.clip_norm)
         optimizer.step()
-        result.seconds.append(time.perf_counter() - started)
-    if result.best_epoch < 0:
-        raise NoFiniteEpoch(result.stopped or "no epoch gave a finite loss")
-    law.load_state_dict(best_state)
-    return result
+
+
+class _Stop(Exception):
+    """Ends an L-BFGS step from inside its closure."""
+
+
+#: Objective (in units of the first loss) an L-BFGS trial point that makes the simulation or the
+#: gradient non-finite counts as, so the line search steps back instead of stopping.
+REJECTED_TRIAL_LOSS = 1e3
+#: Rejected trial points after which L-BFGS gives up.
+MAX_REJECTED_TRIALS = 5
+
+
+def _lbfgs(fit: _Fit, trainable: list[nn.Parameter], evaluations: int) -> None:
+    # Losses and gradients are tiny (1e-6 and below): the objective is scaled by the first loss
+    # and no tolerance may stop it early.
+    optimizer = torch.optim.LBFGS(
+        trainable, lr=1.0, max_iter=evaluations, max_eval=evaluations, history_size=10,
+        tolerance_grad=0.0, tolerance_change=0.0, line_search_fn="strong_wolfe",
+    )  # fmt: skip
+    scale: list[float] = []  # the first loss: the objective is loss / scale, of order one
+    rejected: list[str] = []  # why trial points failed
+
+    def closure() -> torch.Tensor:
+        if fit.epochs_done + len(rejected) >= evaluations:
+            raise _Stop
+        optimizer.zero_grad(set_to_none=True)
+        loss = fit.score(backward=True)
+        if loss is None:
+            if not scale:
+                raise _Stop  # the start itself failed
+            rejected.append(fit.result.stopped)
+            fit.result.stopped = ""
+            if len(rejected) >= MAX_REJECTED_TRIALS:
+                fit.result.stopped = (
+                    f"{len(rejected)} rejected trial points, the last at {rejected[-1]}"
+                )
+                raise _Stop
+            optimizer.zero_grad(set_to_none=True)  # a partial backward may have run
+            return torch.tensor(REJECTED_TRIAL_LOSS, dtype=torch.float64)
+        if not scale:
+            scale.append(loss if loss > 0 else 1.0)
+        for parameter in trainable:
+            if parameter.grad is not None:
+                parameter.grad.div_(scale[0])
+        return torch.tensor(loss / scale[0], dtype=torch.float64)
+
+    with contextlib.suppress(_Stop):
+        optimizer.step(closure)
+    fit.result.rejected_trials = rejected
 
 
 def _non_finite_gradient(law: nn.Module) -> str:

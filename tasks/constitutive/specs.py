@@ -42,6 +42,7 @@ class ConstitutiveSpec:
     reset_every: int = 100
     epochs: int = 30
     learning_rate: float = 3e-2
+    optimizer: str = "adam"
 
     def material(self):
         """The taichi_mpm material that generates the observation."""
@@ -87,7 +88,7 @@ SPECS = {
         ),
         ConstitutiveSpec(
             "imaginary", "plastic return mapping of an imaginary mixed material, elastic known",
-            "plastic", "mixture",
+            "plastic", "mixture", optimizer="lbfgs",
         ),
     )
 }  # fmt: skip

@@ -22,9 +22,8 @@ QUICK = {"steps": 200}  # two teacher-forced segments: enough to tell the laws a
 
 
 def score(name: str, code: str, epochs: int = 0, **settings) -> object:
-    return load_task(name).evaluate(
-        code, EvaluationSettings(epochs=epochs, options=QUICK, **settings)
-    )
+    settings.setdefault("options", QUICK)
+    return load_task(name).evaluate(code, EvaluationSettings(epochs=epochs, **settings))
 
 
 @pytest.mark.parametrize("name", list(TRUTH))
@@ -46,17 +45,28 @@ def _shifted(code: str, replacements: dict[str, float]) -> str:
     return code
 
 
+#: The mixture with every parameter 2x off (yield stress halved: doubled, it never yields).
+IMAGINARY_START = {
+    "log_weight_von_mises": math.log(0.25),
+    "log_weight_sand": math.log(0.6),
+    "log_weight_fluid": math.log(0.15),
+    "log_yield_stress": math.log(1.5e4),
+    "log_friction_angle": math.log(50.0),
+}
+
+
 @pytest.mark.parametrize(
     ("name", "start", "epochs", "learning_rate"),
     [
         ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}, 16,
          0.08),
         ("plasticine", {"log_yield_stress": math.log(6e4)}, 7, 0.15),
+        ("imaginary", IMAGINARY_START, 15, None),  # the task's L-BFGS: no learning rate
     ],
 )  # fmt: skip
 def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epochs, learning_rate):
-    """Fewer epochs at a larger step than the paper's 30 at 3e-2, to fit the test budget;
-    scripts/make_ground_truth.py --fit checks the paper's settings on the full scene."""
+    """Fewer epochs (at a larger step, for Adam) than the task's 30, to fit the test budget;
+    scripts/make_ground_truth.py --fit checks the task's settings on the full scene."""
     code = _shifted((LAWS / TRUTH[name]).read_text(), start)
     result = score(name, code, epochs=epochs, learning_rate=learning_rate)
     assert result.valid, result.reason
@@ -64,6 +74,22 @@ def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epoc
     assert result.loss < first / 100
     assert result.loss == min(result.curves["loss"])  # the best epoch is kept
     assert set(start) <= set(result.parameters)
+
+
+def test_lbfgs_steps_back_from_a_trial_point_that_blows_up():
+    """A unit step in log_scale (the first L-BFGS trial) makes the scene explode: the line
+    search must shrink the step rather than stop, and the feedback says so."""
+    code = (
+        "import torch, torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def __init__(self, log_scale: float = 0.0):\n        super().__init__()\n"
+        "        self.log_scale = nn.Parameter(torch.tensor(log_scale))\n"
+        "    def forward(self, F):\n        return F * torch.exp(self.log_scale)\n"
+    )
+    result = score("plasticine", code, epochs=3, options={**QUICK, "optimizer": "lbfgs"})
+    assert result.valid and result.extras["stopped"] == ""
+    assert len(result.curves["loss"]) >= 2 and result.loss == min(result.curves["loss"])
+    assert "trial points of the line search were rejected" in result.feedback
+    assert "L-BFGS" in result.feedback
 
 
 def test_parameter_free_law_is_scored_once():
