@@ -9,7 +9,8 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Entry:
-    """One evaluated candidate: its id, code, loss (inf when invalid) and feedback."""
+    """One evaluated candidate: its id, code, loss (inf when invalid), feedback and fitted
+    parameter values."""
 
     candidate: str
     code: str
@@ -17,6 +18,7 @@ class Entry:
     feedback: str
     valid: bool
     order: int = 0  # insertion order: ties go to the earlier candidate
+    parameters: dict[str, float] = field(default_factory=dict, compare=False)
 
     def key(self) -> tuple[float, int]:
         return (self.loss if math.isfinite(self.loss) else math.inf, self.order)
@@ -33,8 +35,18 @@ class SolutionHeap:
 
     entries: list[Entry] = field(default_factory=list)
 
-    def push(self, candidate: str, code: str, loss: float, feedback: str, valid: bool) -> Entry:
-        entry = Entry(candidate, code, loss, feedback, valid, order=len(self.entries))
+    def push(
+        self,
+        candidate: str,
+        code: str,
+        loss: float,
+        feedback: str,
+        valid: bool,
+        parameters: dict[str, float] | None = None,
+    ) -> Entry:
+        entry = Entry(
+            candidate, code, loss, feedback, valid, len(self.entries), dict(parameters or {})
+        )
         self.entries.append(entry)
         return entry
 

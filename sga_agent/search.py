@@ -125,7 +125,7 @@ class Search:
                 self.task.prompt_parts(),
                 [Shown(entry.code, entry.feedback, entry.loss) for entry in shown],
             )
-            parents = [Parent(entry.code, entry.loss) for entry in shown]
+            parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
             answers = self._answers_for(iteration, messages, parents)
             stopped = self._evaluate_all(
                 [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
@@ -266,7 +266,10 @@ class Search:
             self.totals.valid += 1
         else:
             self.totals.invalid += 1
-        self.heap.push(candidate, code, evaluation.loss, evaluation.feedback, evaluation.valid)
+        self.heap.push(
+            candidate, code, evaluation.loss, evaluation.feedback, evaluation.valid,
+            evaluation.parameters,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ bookkeeping
 

@@ -152,10 +152,13 @@ class Task(Protocol):
 
 @dataclass(frozen=True)
 class Parent:
-    """An evaluated solution a built-in proposer may mutate or cross: its code and loss."""
+    """An evaluated solution a built-in proposer may mutate or cross: its code, its loss and
+    the fitted values of its continuous parameters (``Evaluation.parameters``; empty when none
+    were fitted), so a child may start where its parent's inner optimization ended."""
 
     code: str
     loss: float
+    parameters: dict[str, float] = field(default_factory=dict)
 
 
 @runtime_checkable

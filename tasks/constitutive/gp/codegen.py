@@ -9,10 +9,23 @@ identical parameter-free subtrees once.
 
 from __future__ import annotations
 
+import math
 import re
+from collections.abc import Mapping
+from dataclasses import replace
 
 from tasks.constitutive.gp import grammar
-from tasks.constitutive.gp.genome import Expr, Genome, GenomeError, Param, from_json, to_json
+from tasks.constitutive.gp.genome import (
+    Expr,
+    Genome,
+    GenomeError,
+    Param,
+    from_json,
+    graft_term,
+    params,
+    to_json,
+    with_term,
+)
 from tasks.constitutive.gp.grammar import MATRIX, SHAPES
 
 GENOME_TAG = "# genome: "
@@ -69,8 +82,8 @@ def _has_param(expr: Expr) -> bool:
     return isinstance(expr, Param) or any(_has_param(child) for child in expr.children)
 
 
-def law_code(genome: Genome) -> str:
-    """Python source of the ``Physics`` module of ``genome``, the genome in a comment."""
+def _walk(genome: Genome) -> tuple[_Forward, list[tuple[str, str]]]:
+    """The body of ``forward`` and each term's (coefficient, value) code."""
     body = _Forward()
     coefficients = []
     for term in genome.terms:
@@ -81,6 +94,32 @@ def law_code(genome: Genome) -> str:
         )
         coefficient = body.param(term.coefficient, grammar.TERM_NAME[genome.kind], meaning)
         coefficients.append((coefficient, body.value(term.expr, MATRIX)))
+    return body, coefficients
+
+
+def parameter_names(genome: Genome) -> list[str]:
+    """Names of the law's parameters, in the order of :func:`genome.params`."""
+    return [name for name, _, _ in _walk(genome)[0].params]
+
+
+def with_values(genome: Genome, values: Mapping[str, float]) -> Genome:
+    """``genome`` with the raw values of the parameters named in ``values`` replaced (the fitted
+    values of an evaluated law, say); names it does not have and non-finite values are ignored."""
+    for (index, path, param), name in zip(params(genome), parameter_names(genome), strict=True):
+        value = values.get(name)
+        if value is None or not math.isfinite(value):
+            continue
+        moved = replace(param, raw=round(float(value), 4))
+        if path is None:
+            genome = with_term(genome, index, replace(genome.terms[index], coefficient=moved))
+        else:
+            genome = graft_term(genome, index, path, moved)
+    return genome
+
+
+def law_code(genome: Genome) -> str:
+    """Python source of the ``Physics`` module of ``genome``, the genome in a comment."""
+    body, coefficients = _walk(genome)
     if genome.kind == "elastic":
         total = " + ".join(f"{c} * {value}" for c, value in coefficients)
         result = [

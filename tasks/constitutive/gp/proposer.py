@@ -2,8 +2,10 @@
 
 Stateless: a parent's genome is read back from the comment its code carries, so a resumed run
 proposes exactly what the original would have. A parent without one (the task's seed law, code
-written by a model) stands in as the identity (plastic search) or a random law (elastic
-search), keeping its loss.
+written by a model) stands in as the genome of the task's seed law (:mod:`.seeds`: the identity
+for plastic search, the linear law for elastic search), keeping its loss. Children start from
+their parents' fitted parameter values (``Parent.parameters``), not from the values the parents
+started with: the fit accumulates over generations, as in a Lamarckian (memetic) algorithm.
 
 Temperature sets the mix of operators: at the exploit temperature (0.5 and below) mostly small
 steps (perturbed starting values, a swapped operation, one term added or dropped) from parents
@@ -21,8 +23,9 @@ from dataclasses import dataclass
 
 from sga_agent.task import Parent
 from tasks.constitutive.gp import grammar
-from tasks.constitutive.gp.codegen import genome_from_code, law_code
+from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
 from tasks.constitutive.gp.genome import Genome, random_genome, to_json
+from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 
 #: Operator weights at the exploit (low) and explore (high) temperature.
@@ -82,9 +85,9 @@ class GeneticProgrammingProposer:
     ) -> list[str]:
         """``n`` answers, each one generated law in a python block; same inputs, same answers."""
         rng = random.Random(seed)
-        pool = [_Member(self._genome(p.code, rng), _loss(p.loss)) for p in parents]
+        pool = [_Member(self._genome(p), _loss(p.loss)) for p in parents]
         if not pool:
-            pool = [_Member(self._genome("", rng), math.inf)]
+            pool = [_Member(seed_genome(self.searched), math.inf)]
         seen = {to_json(member.genome) for member in pool}
         answers = []
         for _ in range(n):
@@ -93,13 +96,11 @@ class GeneticProgrammingProposer:
             answers.append(_answer(law_code(child), note))
         return answers
 
-    def _genome(self, code: str, rng: random.Random) -> Genome:
-        genome = genome_from_code(code, self.searched)
-        if genome is not None:
-            return genome
-        if self.searched == "plastic":
-            return Genome("plastic")
-        return random_genome(rng, self.searched)
+    def _genome(self, parent: Parent) -> Genome:
+        genome = genome_from_code(parent.code, self.searched)
+        if genome is None:
+            return seed_genome(self.searched, parent.parameters)
+        return with_values(genome, parent.parameters)
 
     def _child(
         self, rng: random.Random, pool: list[_Member], temperature: float, seen: set[str]

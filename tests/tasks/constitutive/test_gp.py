@@ -17,10 +17,12 @@ from sga_agent.registry import load_task
 from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
 from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer
-from tasks.constitutive.gp.codegen import genome_from_code, law_code
-from tasks.constitutive.gp.genome import Genome, Node, Param, Term, fits, random_genome
+from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
+from tasks.constitutive.gp.genome import Genome, Node, Param, Term, fits, params, random_genome
 from tasks.constitutive.gp.proposer import operator_weights
+from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
+from tasks.constitutive.inner import scalar_parameters
 from tasks.constitutive.law_code import load_law
 
 GP = Path(__file__).resolve().parents[3] / "tasks" / "constitutive" / "gp"
@@ -253,6 +255,37 @@ def test_the_task_offers_the_proposer_and_it_starts_from_the_seed():
         assert len(proposer.propose_from([], 1.0, 3, seed=0)) == 3
     with pytest.raises(ValueError, match="searched must be"):
         GeneticProgrammingProposer("fluid")
+
+
+def test_the_elastic_seed_genome_is_the_seed_law():
+    """The genome a seed parent stands for computes the seed law's stress (symmetrised)."""
+    genome = seed_genome("elastic")
+    assert fits(genome) and seed_genome("plastic") == Genome("plastic")
+    generated = load_law(law_code(genome), torch.float64)
+    seed = load_law(prompt_text.ELASTIC_SEED, torch.float64)
+    F = deformations(batch=64, spread=0.1, seed=7)
+    with torch.no_grad(), stable_linalg():
+        expected, found = seed(F), generated(F)
+    expected = (expected + expected.transpose(-2, -1)) / 2
+    assert torch.allclose(found, expected, rtol=0, atol=1e-5 * expected.abs().max())
+
+
+def test_children_start_from_their_parents_fitted_values():
+    genome = random_genome(random.Random(3), "elastic")
+    fitted = {name: 1.5 + i for i, name in enumerate(parameter_names(genome))}
+    law = load_law(law_code(with_values(genome, fitted)), torch.float64)
+    assert scalar_parameters(law) == pytest.approx(fitted)
+    proposer = GeneticProgrammingProposer("elastic")
+    seed_fit = {"log_youngs_modulus": 12.0, "poissons_ratio": 0.3}
+    for parent, value in [
+        (Parent(law_code(genome), 1.0, fitted), 1.5),
+        (Parent(prompt_text.ELASTIC_SEED, 1.0, seed_fit), math.log(math.exp(12.0) / 2.6)),  # mu
+    ]:
+        raw_values = set()
+        for answer in proposer.propose_from([parent], 0.5, 8, seed=0):
+            child = genome_from_code(parse_response(answer).code, "elastic")
+            raw_values |= {param.raw for _, _, param in params(child)}
+        assert any(abs(raw - value) < 1e-4 for raw in raw_values), (value, raw_values)
 
 
 def shape(genome: Genome) -> list:
