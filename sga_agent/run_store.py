@@ -94,10 +94,18 @@ class RunStore:
     # ------------------------------------------------------------------ events
 
     def append(self, event: dict[str, Any]) -> None:
-        """Append one event durably (flushed and fsynced before returning)."""
+        """Append one event durably (flushed and fsynced before returning).
+
+        After a kill mid-write the log may end in a partial line: the event then starts on a
+        line of its own, so the partial line alone is lost (and skipped when read back).
+        """
         line = json.dumps({"time": time.time(), **event}, default=_json_default)
-        with open(self.path / EVENTS, "a", encoding="utf-8") as log:
-            log.write(line + "\n")
+        with open(self.path / EVENTS, "a+b") as log:
+            if log.tell() > 0:
+                log.seek(-1, os.SEEK_END)
+                if log.read(1) != b"\n":
+                    line = "\n" + line
+            log.write((line + "\n").encode("utf-8"))
             log.flush()
             os.fsync(log.fileno())
 

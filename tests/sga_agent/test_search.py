@@ -153,6 +153,11 @@ def test_resume_reuses_answers_and_evaluations(tmp_path):
         (e.candidate, e.loss) for e in full.heap.top(10)
     ]
     assert len(evaluator.calls) == 3  # only the answers of iteration 2
+    # the torn line stays alone: every event written after it is read back
+    torn, *after = (store.path / "events.jsonl").read_text().splitlines()[len(kept) + 1 :]
+    assert torn == '{"type": "evaluation", "cand'
+    assert len(store.events()) == 1 + len(kept) + len(after)
+    assert store.recorded().finished
 
 
 def test_replay_needs_no_model(tmp_path):
