@@ -130,15 +130,20 @@ def smiles_of(candidate: Candidate) -> str:
 def plot_molecules(candidates: list[Candidate], path: Path) -> Path:
     """2D depictions of ``candidates`` side by side, each with its id and loss."""
     from rdkit import Chem
-    from rdkit.Chem import Draw
+    from rdkit.Chem import Draw, rdDepictor
 
     options = Draw.MolDrawOptions()
     options.legendFontSize = 22
     molecules = [Chem.MolFromSmiles(smiles_of(candidate)) for candidate in candidates]
     legends = [f"#{rank} {c.id}: loss {c.loss:.4g}" for rank, c in enumerate(candidates, 1)]
-    image = Draw.MolsToGridImage(
-        molecules, molsPerRow=len(molecules), subImgSize=(450, 400), legends=legends,
-        drawOptions=options,
-    )  # fmt: skip
+    preferred = rdDepictor.GetPreferCoordGen()
+    rdDepictor.SetPreferCoordGen(True)  # bridged rings without overlapping atoms
+    try:
+        image = Draw.MolsToGridImage(
+            molecules, molsPerRow=len(molecules), subImgSize=(450, 400), legends=legends,
+            drawOptions=options,
+        )  # fmt: skip
+    finally:
+        rdDepictor.SetPreferCoordGen(preferred)
     image.save(path, dpi=(DPI, DPI))
     return path

@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from sga_agent.report.data import Candidate, Run
 from sga_agent.task import STATUSES
@@ -21,6 +22,8 @@ STATUS_COLOURS = dict(zip(STATUSES, (
     "#2a9d8f", "#e9c46a", "#f4a261", "#e76f51", "#8d6e63", "#9c27b0", "#455a64",
 ), strict=True))  # fmt: skip
 CURVES_WIDTH, CURVES_ROW_HEIGHT, MAX_PARAMETER_PANELS = 11.0, 2.6, 3
+#: A loss curve gets a log axis when it spans more than this factor (two decades).
+LOG_SPAN = 100.0
 
 
 def new_figure(width: float, height: float) -> Figure:
@@ -112,16 +115,20 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
         losses = candidate.curves.get("loss", [])
         axes = figure.add_subplot(grid[row, 0])
         axes.plot(range(len(losses)), losses, "-o", markersize=3, color="#264653", label="loss")
-        if losses and min(losses) > 0:
+        if losses and min(losses) > 0 and max(losses) > LOG_SPAN * min(losses):
             axes.set_yscale("log")
+            axes.yaxis.set_minor_formatter(NullFormatter())
+        else:  # over a short span a log axis labels its minor ticks; a linear one reads better
+            axes.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useMathText=True)
         axes.set_title(f"#{row + 1} {candidate.id}: loss", loc="left")
-        axes.set_ylabel(loss_label.split(" (")[0])
+        axes.set_ylabel("loss")
         axes.set_xlabel("epoch")
         names = [name for name in candidate.curves if name != "loss"]
         for column, name in enumerate(names[:MAX_PARAMETER_PANELS], start=1):
             values = candidate.curves[name]
             axes = figure.add_subplot(grid[row, column])
             axes.plot(range(len(values)), values, "-o", markersize=3, color="#2a9d8f")
+            axes.ticklabel_format(axis="y", useOffset=False)  # an offset text hits the title
             axes.set_title(name, loc="left")
             axes.set_xlabel("epoch")
             axes.set_ylabel("value")
@@ -132,6 +139,6 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
     if not candidates:
         figure.add_subplot().text(0.5, 0.5, "no scored candidate", ha="center")
     hidden = any(len(c.curves) - 1 > MAX_PARAMETER_PANELS for c in candidates)
-    note = f" (first {MAX_PARAMETER_PANELS} parameters; all in curves.json)" if hidden else ""
-    figure.suptitle(f"Inner-loop optimisation of the top candidates{note}")
+    note = f"; first {MAX_PARAMETER_PANELS} parameters shown, all in curves.json" if hidden else ""
+    figure.suptitle(f"Inner-loop optimisation of the top candidates\n{loss_label}{note}")
     return save(figure, path)

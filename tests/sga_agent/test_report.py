@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 from click.testing import CliRunner
 
 from sga_agent.cli import main
+from sga_agent.report import pictures
+from sga_agent.report.data import Candidate, Run
 from sga_agent.report.plots import DPI, curves_size
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
@@ -59,6 +62,43 @@ def test_report_has_every_section_and_figure(tmp_path):
     assert png_size(folder / "outcomes.png") == (7 * DPI, 4 * DPI)
     width, height = curves_size([None] * 3)
     assert png_size(folder / "curves.png") == (round(width * DPI), round(height * DPI))
+
+
+class WithMolecules(CurvesAndFailures):
+    """As :class:`CurvesAndFailures`, each scored candidate recorded as a molecule."""
+
+    SMILES = {100.0: "CCCCCCCCO", 5.0: "c1ccccc1O", 3.0: "CC(=O)Nc1ccc(O)cc1", 1.0: "CCOC(=O)C",
+              2.0: "c1ccc2ccccc2c1", 4.0: "CCN(CC)CC"}  # fmt: skip
+
+    def submit(self, task, solution, settings):
+        future = super().submit(task, solution, settings)
+        if future.result().valid:
+            future._result.extras["smiles"] = self.SMILES[future.result().loss]
+        return future
+
+
+def test_molecule_report_draws_the_top_three(tmp_path):
+    cfg = config(task="homo")  # a registered molecule task: the report adds its picture
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    Search(cfg, FakeTask(), Scripted(answers), WithMolecules(), store).run()
+
+    result = CliRunner().invoke(main, ["report", str(store.path)])
+    assert result.exit_code == 0, result.output
+    folder = store.path / "report"
+    assert "## Top 3 molecules" in (folder / "report.md").read_text()
+    assert '<img src="molecules.png"' in (folder / "report.html").read_text()
+    assert png_size(folder / "molecules.png") == (3 * 450, 400)  # three 450x400 drawings
+
+
+def test_motion_picture_of_the_best_law(tmp_path, monkeypatch):
+    monkeypatch.setattr(pictures, "GIF_FRAMES", 3)  # the GIF's frames cost most of the time
+    law = Path(__file__).resolve().parents[2] / "examples" / "laws" / "neo_hookean.py"
+    best = Candidate("01-exploit-00", "ok", 1e-3, code=law.read_text())
+    run = Run(tmp_path, {"task": "elastic", "task_options": {"steps": 12}}, [best])
+    png, gif = pictures.plot_motion(run, best, tmp_path)
+    assert png_size(png) == (round(2.8 * pictures.MOTION_FRAMES * DPI), 6 * DPI)
+    assert gif.read_bytes()[:6] == b"GIF89a"
 
 
 def test_report_rejects_a_folder_that_is_no_run(tmp_path):
