@@ -29,9 +29,9 @@ from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 
 #: Operator weights at the exploit (low) and explore (high) temperature.
-EXPLOIT = {"perturb": 5.0, "swap_op": 2.0, "add_term": 1.0, "drop_term": 1.0,
+EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "swap_op": 2.0, "add_term": 1.0, "drop_term": 1.0,
            "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
-EXPLORE = {"perturb": 1.0, "swap_op": 1.0, "add_term": 1.0, "drop_term": 0.5,
+EXPLORE = {"perturb": 1.0, "rescale": 1.0, "swap_op": 1.0, "add_term": 1.0, "drop_term": 0.5,
            "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
 LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
@@ -39,6 +39,7 @@ MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
 DESCRIPTIONS = {
     "perturb": "moved one starting value of",
+    "rescale": "scaled every term's coefficient of",
     "swap_op": "swapped one operation of",
     "add_term": "added a random term to",
     "drop_term": "dropped a term of",

@@ -28,6 +28,7 @@ from tasks.constitutive.gp.genome import (
 
 Operator = Callable[[random.Random, Genome, Genome, float], Genome | None]
 REPLACEMENT_DEPTH = 4  # depth budget of a subtree drawn to replace another
+RESCALE_SPREAD = 1.5  # standard deviation of a rescaling step at temperature 1
 ADOPTION = 0.3  # chance that crossover adopts a whole term of the other parent
 
 
@@ -46,6 +47,21 @@ def perturb(rng: random.Random, genome: Genome, other: Genome, temperature: floa
     if path is None:
         return with_term(genome, index, replace(genome.terms[index], coefficient=moved))
     return graft_term(genome, index, path, moved)
+
+
+def rescale(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """Shift every term's coefficient by one Gaussian step: a stiffer or softer elastic law
+    (all moduli times one factor), or stronger or weaker plastic corrections (all logits)."""
+    if not genome.terms:
+        return None
+    step = rng.gauss(0.0, RESCALE_SPREAD * temperature)
+    terms = tuple(
+        replace(
+            term, coefficient=replace(term.coefficient, raw=round(term.coefficient.raw + step, 4))
+        )
+        for term in genome.terms
+    )
+    return replace(genome, terms=terms)
 
 
 def swap_op(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
@@ -124,6 +140,7 @@ def fresh(rng: random.Random, genome: Genome, other: Genome, temperature: float)
 
 OPERATORS: dict[str, Operator] = {
     "perturb": perturb,
+    "rescale": rescale,
     "swap_op": swap_op,
     "add_term": add_term,
     "drop_term": drop_term,

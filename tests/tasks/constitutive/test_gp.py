@@ -18,7 +18,16 @@ from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
 from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
-from tasks.constitutive.gp.genome import Genome, Node, Param, Term, fits, params, random_genome
+from tasks.constitutive.gp.genome import (
+    Genome,
+    Node,
+    Param,
+    Term,
+    fits,
+    params,
+    random_genome,
+    random_term,
+)
 from tasks.constitutive.gp.proposer import operator_weights
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
@@ -77,6 +86,18 @@ def test_variation_operators_give_valid_laws(kind, operator):
             assert_runs(law_code(child), kind)
             children += 1
     assert children > 0
+
+
+def test_rescale_shifts_every_coefficient_by_one_step():
+    rng = random.Random(4)
+    parent = Genome("elastic", (*random_genome(rng, "elastic").terms, random_term(rng, "elastic")))
+    child = OPERATORS["rescale"](rng, parent, parent, 1.0)
+    shifts = {
+        round(new.coefficient.raw - old.coefficient.raw, 3)
+        for old, new in zip(parent.terms, child.terms, strict=True)
+    }
+    assert len(shifts) == 1 and shifts != {0.0}
+    assert [t.expr for t in child.terms] == [t.expr for t in parent.terms]
 
 
 def test_the_plastic_identity_returns_F():
