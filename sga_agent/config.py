@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +29,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     "eureka": {"iterations": 5, "top_k": 1, "exploit": 0, "explore": 16, "bilevel": False},
     "opro": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": False},
 }
+
+
+#: Where candidates are evaluated: this machine's process pool, or a Ray cluster.
+EXECUTORS = ("local", "ray")
+#: A Ray head node's GCS address, HOST:PORT (the port ``ray start --head`` printed).
+_RAY_ADDRESS = re.compile(r"^[A-Za-z0-9._-]+:\d{1,5}$")
 
 
 class ConfigError(ValueError):
@@ -57,8 +65,18 @@ class SearchConfig:
     task_options : dict
         Task-specific evaluation options (e.g. ``{"steps": 200}`` for a short scene).
     workers : int
-        Candidates evaluated at once, each in its own sandboxed process.
+        Candidates evaluated at once, each in its own sandboxed process (with the ``ray``
+        executor: the size of the local Ray instance started when no address is given).
     timeout_s, memory_mb : limits of one evaluation.
+    executor : str
+        "local" (a pool of sandboxed processes on this machine) or "ray" (each evaluation a
+        Ray task running the same sandboxed worker on a node of a Ray cluster).
+    ray_address : str, optional
+        The Ray cluster: "HOST:PORT" of its head node, or "auto" (``RAY_ADDRESS``, else a
+        cluster started on this machine with ``ray start``); None starts a private local Ray
+        instance for the run.
+    ray_cpus_per_task, ray_memory_mb : optional
+        Ray resources each evaluation reserves: CPUs, and memory in MiB (None: none).
     max_usd, max_tokens, max_evaluations : optional budgets; the run stops cleanly at them.
     seed : int
         Seed passed to the evaluations and the offline proposers.
@@ -85,6 +103,10 @@ class SearchConfig:
     max_tokens: int | None = None
     max_evaluations: int | None = None
     seed: int = 0
+    executor: str = "local"
+    ray_address: str | None = None
+    ray_cpus_per_task: float = 1.0
+    ray_memory_mb: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("iterations", "top_k", "workers"):
@@ -102,6 +124,33 @@ class SearchConfig:
             value = getattr(self, name)
             if value is not None and value <= 0:
                 raise ConfigError(f"{name} must be positive, got {value}")
+        self._check_executor()
+
+    def _check_executor(self) -> None:
+        if self.executor not in EXECUTORS:
+            raise ConfigError(
+                f"executor must be one of {', '.join(EXECUTORS)}, got {self.executor!r}"
+            )
+        defaults = {"ray_address": None, "ray_cpus_per_task": 1.0, "ray_memory_mb": None}
+        given = [name for name, default in defaults.items() if getattr(self, name) != default]
+        if self.executor != "ray" and given:
+            raise ConfigError(f"{', '.join(given)} only apply to executor 'ray' (--executor ray)")
+        address = self.ray_address
+        if address is not None and address != "auto" and not _RAY_ADDRESS.match(address):
+            raise ConfigError(
+                f"ray_address must be HOST:PORT of the Ray head node (e.g. 10.0.0.5:6379) "
+                f"or auto, got {address!r}"
+            )
+        cpus = self.ray_cpus_per_task
+        if isinstance(cpus, bool) or not isinstance(cpus, (int, float)):
+            raise ConfigError(f"ray_cpus_per_task must be a number, got {cpus!r}")
+        if not (math.isfinite(cpus) and cpus > 0):
+            raise ConfigError(f"ray_cpus_per_task must be positive, got {cpus}")
+        memory = self.ray_memory_mb
+        if memory is not None and (
+            isinstance(memory, bool) or not isinstance(memory, int) or memory < 1
+        ):
+            raise ConfigError(f"ray_memory_mb must be a positive integer (MiB), got {memory!r}")
 
     @classmethod
     def from_preset(cls, preset: str, **settings: Any) -> SearchConfig:

@@ -1,4 +1,4 @@
-"""Assembling a search from its config: task, proposer, sandbox pool, run store.
+"""Assembling a search from its config: task, proposer, evaluation pool, run store.
 
 Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python).
 """
@@ -6,6 +6,7 @@ Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python)
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,7 @@ from typing import Any
 from sga_agent import registry
 from sga_agent.config import SearchConfig
 from sga_agent.proposers.base import Proposer
+from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool
 from sga_agent.search import Search, SearchResult
@@ -46,12 +48,53 @@ def make_proposer(config: SearchConfig, task: Task) -> Proposer | BuiltinPropose
     return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
 
 
+def with_preferred_options(
+    config: SearchConfig, proposer: Proposer | BuiltinProposer | None
+) -> SearchConfig:
+    """``config`` with the task options a built-in proposer is meant to run with (its
+    ``task_options``, e.g. the constitutive GP's ``{"optimizer": "lbfgs"}``) added; options
+    the config sets already win."""
+    preferred = getattr(proposer, "task_options", None)
+    if not preferred:
+        return config
+    return dataclasses.replace(config, task_options={**preferred, **config.task_options})
+
+
 def replayed_answers(config: SearchConfig) -> dict[str, dict[str, Any]]:
     """Recorded model answers of the run named by a ``replay:RUN_DIR`` proposer."""
     if not config.proposer.startswith(REPLAY_PREFIX):
         return {}
     source = RunStore.open(Path(config.proposer[len(REPLAY_PREFIX) :]))
     return source.recorded().proposals
+
+
+def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
+    """The evaluation pool ``config.executor`` names: local processes, or Ray tasks.
+
+    Raises
+    ------
+    sga_agent.ray_executor.RayUnavailableError
+        The ray executor without Ray installed, or with no cluster at ``config.ray_address``.
+    """
+    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
+    if config.executor == "local":
+        return SandboxPool(max_workers=config.workers, limits=limits)
+    return RayPool(
+        config.ray_address,
+        limits,
+        cpus_per_task=config.ray_cpus_per_task,
+        memory_mb=config.ray_memory_mb,
+        local_cpus=math.ceil(config.workers * config.ray_cpus_per_task),
+    )
+
+
+def pool_record(pool: SandboxPool | RayPool) -> dict[str, Any]:
+    """The run's ``sandbox`` event: how workers are isolated and where they run."""
+    if isinstance(pool, RayPool):
+        where = pool.describe()
+    else:
+        where = {"executor": "local", "workers": pool.max_workers}
+    return {"type": "sandbox", "isolation": dataclasses.asdict(pool.isolation()), **where}
 
 
 def run(
@@ -64,8 +107,7 @@ def run(
     task = registry.load_task(config.task)
     if proposer is None and not config.proposer.startswith(REPLAY_PREFIX):
         proposer = make_proposer(config, task)
-    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
-    with SandboxPool(max_workers=config.workers, limits=limits) as pool:
-        store.append({"type": "sandbox", "isolation": dataclasses.asdict(pool.isolation())})
+    with make_pool(config) as pool:
+        store.append(pool_record(pool))
         search = Search(config, task, proposer, pool, store, replayed_answers(config), on_event)
         return search.run()

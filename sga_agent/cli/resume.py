@@ -2,29 +2,41 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import click
 
 from sga_agent.cli import main
-from sga_agent.cli.search import execute, make_proposer
+from sga_agent.cli.search import check_executor, execute, make_proposer
+from sga_agent.config import ConfigError
 from sga_agent.run_store import RunStore, RunStoreError
 
 
 @main.command()
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--ray-address", metavar="HOST:PORT",
+              help="Continue a run of --executor ray on this Ray cluster instead of its own.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
-def resume(run_dir: Path, as_json: bool) -> None:
+def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     """Continue the search recorded in RUN_DIR.
 
     Recorded model answers are not asked again and finished evaluations are not re-run; the
-    search goes on from where it stopped with the run's own settings.
+    search goes on from where it stopped with the run's own settings (and executor).
     """
     try:
         store = RunStore.open(run_dir)
         config = store.config()
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
+    resumed: dict[str, str] = {"type": "resumed"}
+    if ray_address is not None:
+        try:
+            config = dataclasses.replace(config, ray_address=ray_address)
+        except ConfigError as error:
+            raise click.UsageError(str(error)) from error
+        resumed["ray_address"] = ray_address
+    check_executor(config)
     proposer = make_proposer(config)
-    store.append({"type": "resumed"})
+    store.append(resumed)
     execute(config, store, as_json, proposer)

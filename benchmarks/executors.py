@@ -1,0 +1,129 @@
+"""Throughput of the executors: candidates per minute on the local pool and on Ray, side by side.
+
+Both evaluate the same candidates in the same sandboxed workers, ``--workers`` at a time: the
+local pool (:class:`~sga_agent.sandbox.SandboxPool`) in threads of this process, Ray
+(:class:`~sga_agent.ray_executor.RayPool`) as tasks of a local Ray instance of ``--workers``
+CPUs that the benchmark starts. The candidates are, by default, a cheap task that keeps one CPU
+busy for ``--work`` seconds (the sandbox's start-up comes on top), or ``--task NAME`` (e.g.
+``--task elastic --option steps=50 --epochs 1``): its seed solution, evaluated again and again.
+Each pool first evaluates ``--workers`` candidates untimed (Ray starts its worker processes);
+Ray's start-up is reported separately. With ``--repeats``, each pool runs that many times,
+alternately first and second, and the medians are shown. Usage::
+
+    python benchmarks/executors.py [--candidates 40] [--workers 2] [--work 0.5] [--repeats 3]
+    python benchmarks/executors.py --task elastic --option steps=50 --epochs 1 --candidates 8
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from collections.abc import Callable
+from concurrent.futures import wait
+from pathlib import Path
+
+from sga_agent import registry
+from sga_agent.cli.options import key_value_options
+from sga_agent.ray_executor import RayPool
+from sga_agent.sandbox import SandboxLimits, SandboxPool
+from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+
+HERE = Path(__file__).resolve().parent
+BUSY_TASK = "executors:BusyTask"
+
+
+class BusyTask:
+    """The solution is a number of seconds to keep one CPU busy (a benchmark task)."""
+
+    name = "busy"
+    description = "Keeps a CPU busy for as many seconds as the solution says."
+    kind = "equation"
+
+    def seed_solution(self) -> str:
+        return "0.5"
+
+    def prompt_parts(self) -> PromptParts:
+        return PromptParts(role="", context="", template="", requirements="")
+
+    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
+        deadline = time.process_time() + float(solution.split()[0])
+        spins = 0
+        while time.process_time() < deadline:
+            spins += 1
+        return Evaluation(True, 0.0, "", extras={"spins": spins})
+
+
+def throughput(pool: SandboxPool | RayPool, task: str, solutions: list[str], settings) -> float:
+    """Seconds to evaluate ``solutions`` (all submitted at once); every one must be valid."""
+    started = time.perf_counter()
+    futures = [pool.submit(task, solution, settings) for solution in solutions]
+    wait(futures)
+    seconds = time.perf_counter() - started
+    failed = [future.result() for future in futures if not future.result().valid]
+    if failed:
+        raise RuntimeError(f"{len(failed)} evaluations failed, e.g.: {failed[0].reason}")
+    return seconds
+
+
+def measure(
+    name: str, make: Callable[[], SandboxPool | RayPool], task: str, solutions: list[str],
+    settings: EvaluationSettings, workers: int,
+) -> dict[str, float]:  # fmt: skip
+    """Start-up, warm-up (untimed in the throughput) and the timed evaluations of one pool."""
+    started = time.perf_counter()
+    with make() as pool:
+        start_up = time.perf_counter() - started
+        throughput(pool, task, [f"{solutions[0]}\n# warm-up {i}" for i in range(workers)], settings)
+        seconds = throughput(pool, task, solutions, settings)
+    print(f"  {name}: {len(solutions)} candidates in {seconds:.1f} s", flush=True)
+    return {"start-up s": start_up, "seconds": seconds, "per minute": 60 * len(solutions) / seconds}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--candidates", type=int, default=40, help="timed evaluations per pool")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--work", type=float, default=0.5, help="CPU seconds per cheap candidate")
+    parser.add_argument("--task", help="a registered task: evaluate its seed solution instead")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--epochs", type=int, help="inner-optimization epochs of --task")
+    parser.add_argument("--timeout", type=float, default=900.0, help="limit per evaluation (s)")
+    parser.add_argument("--repeats", type=int, default=1, help="runs per pool, interleaved")
+    args = parser.parse_args()
+
+    if args.task:
+        task, seed = args.task, registry.load_task(args.task).seed_solution()
+    else:
+        task, seed = BUSY_TASK, str(args.work)
+    settings = EvaluationSettings(epochs=args.epochs, options=key_value_options(args.option))
+    solutions = [f"{seed}\n# candidate {i}" for i in range(args.candidates)]
+    limits = SandboxLimits(timeout_s=args.timeout)
+    paths = [] if args.task else [HERE]
+    print(f"{args.candidates} candidates of {args.task or f'{args.work:g} CPU s'}, "
+          f"{args.workers} at a time, on {os.cpu_count()} cores", flush=True)  # fmt: skip
+    pools: dict[str, Callable[[], SandboxPool | RayPool]] = {
+        "local": lambda: SandboxPool(args.workers, limits, extra_python_path=paths),
+        "ray": lambda: RayPool(None, limits, local_cpus=args.workers, extra_python_path=paths),
+    }
+    runs: dict[str, list[dict[str, float]]] = {name: [] for name in pools}
+    for repeat in range(args.repeats):  # alternating the order evens out a drifting load
+        for name in sorted(pools, reverse=repeat % 2 == 1):
+            measured = measure(name, pools[name], task, solutions, settings, args.workers)
+            runs[name].append(measured)
+    results = {
+        name: {key: statistics.median(run[key] for run in measured) for key in measured[0]}
+        for name, measured in runs.items()
+    }
+    print(f"\n| executor | start-up | {args.candidates} candidates | candidates / minute |")
+    print("|---|---|---|---|")
+    for name, row in results.items():
+        print(f"| {name} | {row['start-up s']:.1f} s | {row['seconds']:.1f} s "
+              f"| {row['per minute']:.1f} |")  # fmt: skip
+    ratio = results["ray"]["per minute"] / results["local"]["per minute"]
+    print(f"\nRay / local throughput: {ratio:.2f} (medians of {args.repeats} runs each)")
+
+
+if __name__ == "__main__":
+    main()
