@@ -15,6 +15,7 @@ import click
 
 from sga_agent.benchmark import chart, table
 from sga_agent.benchmark.grid import GridError, Method, plan_cells, run_cells
+from sga_agent.cli.options import task_options
 from sga_agent.config import SearchConfig
 
 #: SearchConfig fields the grid or its own options set, not ``--set``.
@@ -51,19 +52,6 @@ def _pairs(
             raise click.BadParameter(f"{item!r} is not KEY=VALUE (e.g. {example})", ctx, param)
         pairs.append((key, raw))
     return pairs
-
-
-def parse_options(ctx: click.Context, param: click.Parameter, items: tuple[str, ...]):
-    """Click callback: task options KEY=VALUE, values read as int, float or text."""
-    options: dict[str, Any] = {}
-    for key, raw in _pairs(items, "steps=100", ctx, param):
-        for convert in (int, float, str):
-            try:
-                options[key] = convert(raw)
-                break
-            except ValueError:
-                continue
-    return options
 
 
 def parse_settings(ctx: click.Context, param: click.Parameter, items: tuple[str, ...]):
@@ -116,7 +104,7 @@ def grid_options(default_out: str) -> Callable[[Callable[..., Any]], Callable[..
                      default=Path(default_out), show_default=True,
                      help="Output folder: cells in <task>/<method>/seed-<n>/, then the tables "
                      "and ranks.png. Running again skips finished cells, resumes the others."),
-        click.option("--option", "task_options", multiple=True, callback=parse_options,
+        click.option("--option", "task_options", multiple=True, callback=task_options,
                      metavar="KEY=VALUE", help="Task option for every cell, repeatable "
                      "(e.g. steps=100)."),
         click.option("--epochs", type=click.IntRange(min=0),

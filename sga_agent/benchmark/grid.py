@@ -117,6 +117,14 @@ def plan_cells(
     for task in tasks:
         loaded = None
         for method in methods:
+            chosen = None
+            if not method.proposer.startswith(runner.REPLAY_PREFIX):
+                loaded = _load(task) if loaded is None else loaded
+                try:
+                    probe = SearchConfig(task=task, proposer=method.proposer)
+                    chosen = runner.make_proposer(probe, loaded)
+                except ValueError as error:  # no such built-in, malformed model string
+                    raise GridError(f"method {method.label!r} on task {task!r}: {error}") from error
             for seed in seeds:
                 proposer = method.proposer
                 if proposer.startswith(runner.REPLAY_PREFIX):
@@ -128,14 +136,9 @@ def plan_cells(
                     config = SearchConfig.from_preset(method.preset, **values)
                 except (ConfigError, TypeError) as error:
                     raise GridError(f"method {method.label!r}: {error}") from error
+                config = runner.with_preferred_options(config, chosen)
                 folder = Path(out) / task / method.folder / f"seed-{seed}"
                 cells.append(Cell(task, method, seed, folder, config))
-            if not method.proposer.startswith(runner.REPLAY_PREFIX):
-                loaded = _load(task) if loaded is None else loaded
-                try:
-                    runner.make_proposer(cells[-1].config, loaded)
-                except ValueError as error:  # no such built-in, malformed model string
-                    raise GridError(f"method {method.label!r} on task {task!r}: {error}") from error
     for cell in cells:
         cell_run(cell)  # a folder holding a run with other settings stops the grid here
     return cells

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 from rich.console import Console
@@ -12,7 +13,7 @@ from rich.table import Table
 from rich.text import Text
 
 from sga_agent.cli import main
-from sga_agent.cli.options import task_or_factory
+from sga_agent.cli.options import task_options, task_or_factory
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
 from sga_agent.task import Evaluation, EvaluationSettings
 
@@ -49,6 +50,14 @@ def extract_solution(text: str) -> str:
     help="Learning rate of the inner optimization [default: the task's].",
 )
 @click.option(
+    "--option",
+    "options",
+    multiple=True,
+    callback=task_options,
+    metavar="KEY=VALUE",
+    help="Task option, repeatable (e.g. steps=200, optimizer=lbfgs for the constitutive tasks).",
+)
+@click.option(
     "--json",
     "as_json",
     is_flag=True,
@@ -74,6 +83,7 @@ def evaluate(
     file: Path,
     epochs: int | None,
     learning_rate: float | None,
+    options: dict[str, Any],
     as_json: bool,
     timeout_s: float,
     memory_mb: int,
@@ -90,7 +100,7 @@ def evaluate(
     except (OSError, UnicodeDecodeError) as error:
         raise click.BadParameter(f"cannot read '{file}': {error}", param_hint="'FILE'") from error
     limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
-    settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate)
+    settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=options)
     extra_path = [Path.cwd()] if ":" in task_name else []
     evaluation = evaluate_in_sandbox(
         task_name, extract_solution(text), settings, limits, extra_python_path=extra_path

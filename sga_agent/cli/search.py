@@ -4,34 +4,17 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 import click
 from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
-from sga_agent.cli.options import registered_task
+from sga_agent.cli.options import registered_task, task_options
 from sga_agent.cli.progress import SearchProgress, print_result
-from sga_agent.config import PRESETS, ConfigError, SearchConfig
+from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
+from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunStore, RunStoreError
-
-
-def _task_options(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]):
-    options: dict[str, Any] = {}
-    for item in values:
-        key, sep, raw = item.partition("=")
-        if not sep or not key:
-            raise click.BadParameter(f"{item!r} is not KEY=VALUE (e.g. steps=200)", ctx, param)
-        for convert in (int, float):
-            try:
-                options[key] = convert(raw)
-                break
-            except ValueError:
-                continue
-        else:
-            options[key] = raw
-    return options
 
 
 @main.command()
@@ -62,7 +45,7 @@ def _task_options(ctx: click.Context, param: click.Parameter, values: tuple[str,
 @click.option("--epochs", type=click.IntRange(min=0), help="Inner-optimization epochs.")
 @click.option("--lr", "learning_rate", type=click.FloatRange(min=0, min_open=True),
               help="Inner-optimization learning rate.")
-@click.option("--option", "task_options", multiple=True, callback=_task_options,
+@click.option("--option", "task_options", multiple=True, callback=task_options,
               metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200).")
 @click.option("--workers", type=click.IntRange(min=1), default=os.cpu_count() or 1,
               show_default=True, help="Candidates evaluated at once (one process each).")
@@ -70,6 +53,18 @@ def _task_options(ctx: click.Context, param: click.Parameter, values: tuple[str,
               show_default=True, help="Wall-clock limit of one evaluation (s).")
 @click.option("--memory-mb", type=click.IntRange(min=64), default=4096, show_default=True,
               help="Memory limit of one evaluation (MiB).")
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
+              help="Where candidates are evaluated: this machine's pool of sandboxed worker "
+              "processes, or a Ray cluster (each evaluation a Ray task running the same "
+              f"sandboxed worker on a node; needs `{RAY_INSTALL}`).")
+@click.option("--ray-address", metavar="HOST:PORT",
+              help="Head node of the Ray cluster (the port of `ray start --head`), or auto "
+              "(RAY_ADDRESS, else a cluster started on this machine). Default: a private "
+              "local Ray instance of --workers CPUs.")
+@click.option("--ray-cpus", "ray_cpus_per_task", type=click.FloatRange(min=0, min_open=True),
+              help="CPUs each evaluation reserves on its Ray node [1].")
+@click.option("--ray-memory-mb", type=click.IntRange(min=1),
+              help="Memory each evaluation reserves on its Ray node, MiB [none].")
 @click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
@@ -106,9 +101,20 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
             runner.replayed_answers(config)  # fail early on a bad folder
     except (ConfigError, RunStoreError) as error:
         raise click.UsageError(str(error)) from error
+    check_executor(config)
     chosen = make_proposer(config)
+    config = runner.with_preferred_options(config, chosen)
     store = RunStore.create(out, config, {"proposer": proposer})
     execute(config, store, as_json, chosen)
+
+
+def check_executor(config: SearchConfig) -> None:
+    """The ray executor without Ray installed is a usage error, before anything starts."""
+    if config.executor == "ray":
+        try:
+            import_ray()
+        except RayUnavailableError as error:
+            raise click.UsageError(str(error)) from error
 
 
 def make_proposer(config: SearchConfig):
@@ -124,6 +130,10 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
         console.print(f"run folder: {store.path}")
-    with SearchProgress(console, config) as progress:
-        result = runner.run(config, store, progress, proposer)
+    try:
+        with SearchProgress(console, config) as progress:
+            result = runner.run(config, store, progress, proposer)
+    except RayUnavailableError as error:  # e.g. no cluster at --ray-address
+        resume = f"`sga-agent resume {store.path}` continues the run"
+        raise click.ClickException(f"{error}\n{resume}") from error
     print_result(console, store, result, as_json)

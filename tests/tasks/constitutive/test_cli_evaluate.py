@@ -1,7 +1,9 @@
 """`sga-agent evaluate` on broken law files: a one-line reason and a non-zero exit, no crash."""
 
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -36,3 +38,18 @@ def test_broken_law_files(case, tmp_path):
     lines = [line for line in run.stderr.splitlines() if line.startswith("invalid:")]
     assert len(lines) == 1 and reason in lines[0], run.stderr
     assert "Traceback" not in run.stderr + run.stdout
+
+
+def test_task_options_reach_the_evaluation():
+    law = Path(__file__).resolve().parents[3] / "examples" / "laws" / "von_mises.py"
+    command = [sys.executable, "-m", "sga_agent", "evaluate", "--task", "plasticine", str(law)]
+    run = subprocess.run(
+        [*command, "--epochs", "1", "--option", "steps=100", "--option", "optimizer=lbfgs",
+         "--json"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    evaluation = json.loads(run.stdout)
+    assert "L-BFGS" in evaluation["feedback"] and evaluation["loss"] < 1e-8
+    bad = subprocess.run([*command, "--option", "steps"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "is not KEY=VALUE" in bad.stderr

@@ -12,8 +12,10 @@ import torch
 
 from bridges import laws as torch_laws
 from bridges.linalg import stable_linalg
+from sga_agent.config import SearchConfig
 from sga_agent.parsing import check_code, parse_response
 from sga_agent.registry import load_task
+from sga_agent.runner import with_preferred_options
 from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
 from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer
@@ -360,3 +362,11 @@ def test_gp_laws_are_scored_by_the_simulation():
     assert results[0].valid and math.isfinite(results[0].loss)
     for result in results:
         assert result.status in ("ok", "unstable"), result.reason
+
+
+def test_gp_runs_fit_constants_with_lbfgs_unless_told_otherwise():
+    proposer = load_task("elastic").builtin_proposer()
+    default = SearchConfig(task="elastic", proposer="builtin")
+    assert with_preferred_options(default, proposer).task_options == {"optimizer": "lbfgs"}
+    chosen = SearchConfig(task="elastic", proposer="builtin", task_options={"optimizer": "adam"})
+    assert with_preferred_options(chosen, proposer) == chosen
