@@ -245,12 +245,38 @@ def ray_children(binary: str) -> list[int]:
 
 
 @needs_ray
-def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path, double_task):
-    """Every later task would fail: the search stops, as if killed, and can be resumed."""
+def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path):
+    """Every later task would fail: the search stops, as if killed, and can be resumed.
+
+    Run in a child process: when its raylet dies, Ray may end the driver process outright
+    (seen under load), which must not take the test session with it. Either way (the search
+    raised RayClusterLostError, or the process was ended), nothing of iteration 2 and no
+    summary may be recorded.
+    """
+    program = (
+        f"from tests.sga_agent.test_ray import lose_the_node; lose_the_node({str(tmp_path)!r})"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    run = subprocess.run(
+        [sys.executable, "-c", program], cwd=REPO_ROOT, env=environment,
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert run.returncode != 0 or "search stopped: cluster lost" in run.stdout, run.stderr[-2000:]
+    assert "search finished" not in run.stdout
+    (folder,) = (tmp_path / "runs").iterdir()
+    recorded = RunStore.open(folder).recorded().evaluations
+    assert "00-seed" in recorded and not any(name.startswith("02-") for name in recorded)
+    assert not (folder / "summary.json").exists()
+
+
+def lose_the_node(tmp: str) -> None:
+    """The child process of the test above: a search whose raylet is killed mid-iteration."""
     import ray
 
     from sga_agent.ray_executor import RayClusterLostError
 
+    registry.load_task = worker.load
+    tmp_path = Path(tmp)
     release = tmp_path / "release"
     waiting = f"wait:{release}"
     cfg = config(executor="ray", iterations=2, exploit=1, explore=1)
@@ -269,13 +295,14 @@ def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path, dou
                 time.sleep(0.05)
             os.kill(raylet, signal.SIGKILL)
             release.touch()
-            with pytest.raises(RayClusterLostError, match="Ray node of this machine stopped"):
+            try:
                 search.result(timeout=120)
+                print("search finished", flush=True)
+            except RayClusterLostError as error:
+                if "Ray node of this machine stopped" in str(error):
+                    print("search stopped: cluster lost", flush=True)
     finally:
         ray.shutdown()
-    recorded = store.recorded().evaluations
-    assert "00-seed" in recorded and not any(name.startswith("02-") for name in recorded)
-    assert not (store.path / "summary.json").exists()
 
 
 def test_the_ray_executor_without_ray_is_a_usage_error_naming_the_install(tmp_path):
