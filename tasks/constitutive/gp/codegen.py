@@ -21,10 +21,9 @@ from tasks.constitutive.gp.genome import (
     GenomeError,
     Param,
     from_json,
-    graft_term,
     params,
     to_json,
-    with_term,
+    with_param,
 )
 from tasks.constitutive.gp.grammar import MATRIX, SHAPES
 
@@ -109,11 +108,7 @@ def with_values(genome: Genome, values: Mapping[str, float]) -> Genome:
         value = values.get(name)
         if value is None or not math.isfinite(value):
             continue
-        moved = replace(param, raw=round(float(value), 4))
-        if path is None:
-            genome = with_term(genome, index, replace(genome.terms[index], coefficient=moved))
-        else:
-            genome = graft_term(genome, index, path, moved)
+        genome = with_param(genome, index, path, replace(param, raw=round(float(value), 4)))
     return genome
 
 

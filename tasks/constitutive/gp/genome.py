@@ -181,6 +181,14 @@ def graft_term(genome: Genome, index: int, path: tuple[int, ...], new: Expr) -> 
     return with_term(genome, index, replace(term, expr=expr))
 
 
+def with_param(genome: Genome, index: int, path: tuple[int, ...] | None, new: Param) -> Genome:
+    """``genome`` with the parameter :func:`params` locates at ``(index, path)`` (a ``None``
+    path: the term's coefficient) replaced by ``new``."""
+    if path is None:
+        return with_term(genome, index, replace(genome.terms[index], coefficient=new))
+    return graft_term(genome, index, path, new)
+
+
 # ------------------------------------------------------------------------- serialisation
 
 

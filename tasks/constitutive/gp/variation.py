@@ -23,7 +23,7 @@ from tasks.constitutive.gp.genome import (
     random_genome,
     random_term,
     sites,
-    with_term,
+    with_param,
 )
 
 Operator = Callable[[random.Random, Genome, Genome, float], Genome | None]
@@ -43,10 +43,7 @@ def perturb(rng: random.Random, genome: Genome, other: Genome, temperature: floa
         return None
     index, path, param = rng.choice(found)
     step = rng.gauss(0.0, grammar.TRANSFORMS[param.transform].spread * temperature)
-    moved = replace(param, raw=round(param.raw + step, 4))
-    if path is None:
-        return with_term(genome, index, replace(genome.terms[index], coefficient=moved))
-    return graft_term(genome, index, path, moved)
+    return with_param(genome, index, path, replace(param, raw=round(param.raw + step, 4)))
 
 
 def rescale(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
