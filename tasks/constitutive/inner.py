@@ -30,8 +30,8 @@ class InnerSettings:
     """Paper defaults: Adam, learning rate 3e-2, 30 epochs, gradient norm clipped to 1.
 
     ``optimizer="lbfgs"`` uses L-BFGS with a strong-Wolfe line search instead: every epoch is
-    one loss-and-gradient evaluation (a line search may take several), ``learning_rate`` is its
-    first trial step and ``clip_norm`` is unused.
+    one loss-and-gradient evaluation (a line search may take several); ``learning_rate`` and
+    ``clip_norm`` are unused (its steps come from the line search).
     """
 
     epochs: int = 30
@@ -100,7 +100,8 @@ def optimize(
     trainable = [p for p in law.parameters() if p.requires_grad]
     fit = _Fit(rollout, law, observed, settings)
     if not trainable or settings.epochs == 0:
-        fit.score(backward=False)
+        if fit.score(backward=False) is None:
+            fit.result.stopped = fit.failure
     elif settings.optimizer == "lbfgs":
         _lbfgs(fit, trainable, settings.epochs + 1)
     else:
@@ -120,14 +121,15 @@ class _Fit:
         self.rollout, self.law, self.observed, self.settings = rollout, law, observed, settings
         self.result = InnerResult(parameters={name: [] for name in scalar_parameters(law)})
         self.best_state = copy.deepcopy(law.state_dict())
+        self.failure = ""  # why the last score was None
 
     @property
     def epochs_done(self) -> int:
         return len(self.result.losses)
 
     def score(self, backward: bool) -> float | None:
-        """The loss (gradients in ``.grad`` if ``backward``); None, with the reason recorded
-        in ``result.stopped``, when the simulation or the gradient is not finite."""
+        """The loss (gradients in ``.grad`` if ``backward``); None, with the reason in
+        ``failure``, when the simulation or the gradient is not finite."""
         started = time.perf_counter()
         epoch = self.epochs_done
         try:
@@ -136,7 +138,7 @@ class _Fit:
                 self.settings.reset_every, backward=backward,
             )  # fmt: skip
         except UnstableSimulation as error:
-            self.result.stopped = f"epoch {epoch}: {error}"
+            self.failure = f"epoch {epoch}: {error}"
             return None
         result = self.result
         result.losses.append(run.loss)
@@ -148,7 +150,7 @@ class _Fit:
         result.seconds.append(time.perf_counter() - started)
         bad = _non_finite_gradient(self.law) if backward else ""
         if bad:
-            result.stopped = f"epoch {epoch}: the gradient of {bad} is not finite"
+            self.failure = f"epoch {epoch}: the gradient of {bad} is not finite"
             return None
         return run.loss
 
@@ -158,7 +160,10 @@ def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> 
     for epoch in range(settings.epochs + 1):
         last = epoch == settings.epochs
         optimizer.zero_grad(set_to_none=True)
-        if fit.score(backward=not last) is None or last:
+        if fit.score(backward=not last) is None:
+            fit.result.stopped = fit.failure
+            return
+        if last:
             return
         torch.nn.utils.clip_grad_norm_(trainable, settings.clip_norm)
         optimizer.step()
@@ -192,9 +197,9 @@ def _lbfgs(fit: _Fit, trainable: list[nn.Parameter], evaluations: int) -> None:
         loss = fit.score(backward=True)
         if loss is None:
             if not scale:
-                raise _Stop  # the start itself failed
-            rejected.append(fit.result.stopped)
-            fit.result.stopped = ""
+                fit.result.stopped = fit.failure  # the start itself failed
+                raise _Stop
+            rejected.append(fit.failure)
             if len(rejected) >= MAX_REJECTED_TRIALS:
                 fit.result.stopped = (
                     f"{len(rejected)} rejected trial points, the last at {rejected[-1]}"
