@@ -261,6 +261,8 @@ def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path):
         [sys.executable, "-c", program], cwd=REPO_ROOT, env=environment,
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
+    # dying is acceptable only after the raylet was killed, with both candidates running
+    assert "raylet killed mid-iteration" in run.stdout, run.stderr[-2000:]
     assert run.returncode != 0 or "search stopped: cluster lost" in run.stdout, run.stderr[-2000:]
     assert "search finished" not in run.stdout
     (folder,) = (tmp_path / "runs").iterdir()
@@ -289,11 +291,13 @@ def lose_the_node(tmp: str) -> None:
         with ThreadPoolExecutor(1) as background:
             search = background.submit(runner.run, cfg, store, None, proposer)
             deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not search.done():
-                if sum(waiting in solution for *_, solution in sandbox_workers()) == 2:
-                    break  # both candidates of iteration 1 are being evaluated
+            both_running = False  # the two candidates of iteration 1 are being evaluated
+            while time.monotonic() < deadline and not search.done() and not both_running:
+                both_running = sum(waiting in s for *_, s in sandbox_workers()) == 2
                 time.sleep(0.05)
             os.kill(raylet, signal.SIGKILL)
+            if both_running:
+                print("raylet killed mid-iteration", flush=True)
             release.touch()
             try:
                 search.result(timeout=120)
