@@ -13,6 +13,7 @@ satisfying :class:`sga_agent.task.Task`. Loading is lazy: listing names imports 
 from __future__ import annotations
 
 import difflib
+import importlib
 from importlib.metadata import EntryPoint, entry_points
 
 from sga_agent.task import Task
@@ -70,6 +71,25 @@ def load_task(name: str) -> Task:
         raise TypeError(
             f"entry point {name!r} ({point.value}) returned {type(task).__name__}, which "
             "does not satisfy sga_agent.task.Task (name, description, kind, seed_solution, "
-            "prompt_parts, evaluate)"
+            "prompt_parts, capture, evaluate)"
+        )
+    return task
+
+
+def resolve_task(spec: str) -> Task:
+    """A registered task, or the result of ``module:callable`` (a zero-argument factory).
+
+    The second form is a plugin-development and testing aid: no entry point needed.
+    """
+    if ":" not in spec:
+        return load_task(spec)
+    module_name, _, attribute = spec.partition(":")
+    factory = importlib.import_module(module_name)
+    for part in attribute.split("."):
+        factory = getattr(factory, part)
+    task = factory()
+    if not isinstance(task, Task):
+        raise TypeError(
+            f"{spec} returned {type(task).__name__}, which does not satisfy sga_agent.task.Task"
         )
     return task

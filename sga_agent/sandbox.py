@@ -1,53 +1,44 @@
-"""Evaluating untrusted candidates in a separate, limited, isolated worker process.
+"""Evaluating untrusted candidates: capture in a confined process, fit in a trusted one.
 
-A candidate solution is code an LLM wrote. It never runs in the search process: each evaluation
-starts a fresh ``python -m sga_agent.worker`` (see :mod:`sga_agent.worker`) that loads the task,
-calls its ``evaluate`` and writes the :class:`~sga_agent.task.Evaluation` to a result file. The
-child runs in its own session (so the whole process group can be killed), in an empty temporary
-directory removed afterwards (also its ``TMPDIR``), with stdin on ``/dev/null``, a scrubbed
-environment, resource limits and, unless ``SandboxLimits.isolation`` is off, no network and no
-writes outside that directory and the task caches (:mod:`sga_agent.isolation`). Whatever goes
-wrong comes back as an invalid ``Evaluation`` with a ``status`` and a one-line ``reason``, never
-as an exception in the caller:
+A candidate solution is code a model wrote, and code can forge anything in the process that
+runs it: monkeypatch the loss, write the result file, poison caches. So it never runs where its
+score is computed. Each evaluation has two steps, each in its own process:
+
+1. **Capture** (untrusted). A capture server (``python -m sga_agent.capture_server TASK``), one
+   per pool slot, has the task and its libraries loaded; per candidate it forks a confined
+   process (:mod:`sga_agent.isolation`: user ``nobody``, PID, network, mount and IPC
+   namespaces, read-only and private file systems, Landlock, resource limits) that runs the
+   task's ``capture(solution)`` and sends back JSON data through a pipe the server owns.
+2. **Fit** (trusted). A fit worker (``python -m sga_agent.fit_worker TASK``), one per pool slot
+   and warm from one candidate to the next, runs the task's ``evaluate(data, settings)``. It
+   never imports or runs candidate code; the task checks the data before using it.
+
+Whatever goes wrong comes back as an invalid ``Evaluation`` with a ``status`` and a one-line
+``reason``, never as an exception in the caller:
 
 =================  ============================================================================
 status             cause
 =================  ============================================================================
-``timeout``        the wall-clock limit (the process group is killed) or the CPU-time limit
-``out_of_memory``  ``MemoryError`` or a failed native allocation under the memory limit
-``crashed``        a fatal signal (segfault, abort, kill), or an exit without a result
-``error``          an exception in the task's ``evaluate`` or while loading the task (the last
-                   traceback lines in ``extras["traceback"]``), or a worker not isolated as
+``invalid``        the task refused the solution (in its capture, or its data in the fit)
+``timeout``        the wall-clock limit (capture and fit together) or the CPU-time limit
+``out_of_memory``  a failed allocation under the memory limit (capture or fit)
+``crashed``        the capture process was killed by a signal or exited without a result; the
+                   fit worker died
+``error``          an exception in the capture or the fit (the end of the traceback in
+                   ``extras["traceback"]``), or a capture process not isolated as
                    :func:`~sga_agent.isolation.detect_isolation` promised
 ``unstable``       a valid evaluation whose loss is NaN or infinite
 =================  ============================================================================
 
-Tasks themselves return ``invalid`` (and ``unstable``, ``error``) for candidates they reject.
-
-Output
-------
-The worker's stdout and stderr go to a pipe the parent drains while it waits, keeping only the
-last :data:`LOG_TAIL_CHARS` bytes (``extras["log"]`` of a failure). A chatty candidate therefore
-neither fills the disk nor fails by printing, as it would with a file under the file-size limit
-(``OSError: File too large``).
-
-Memory limit
-------------
-The worker limits its *writable private memory* with ``RLIMIT_DATA`` (on Linux >= 4.7 this
-counts heap and private writable ``mmap`` regions, the ``VmData`` line of ``/proc/PID/status``),
-not its address space with ``RLIMIT_AS``. Measured with Taichi 1.7 and torch 2 on CPU: a process
-that has initialised Taichi and used torch has ~0.3 GB resident but 2.25 GB of address space
-and 1.36 GB of ``VmData``; ``ti.init`` alone reserves a 1 GiB memory pool, so it fails under
-``RLIMIT_AS`` = 2 GB once torch is loaded, and the address space grows further with every
-thread (stacks, malloc arenas). GPU drivers reserve far more address space (inaccessible, so
-not counted in ``VmData``). ``memory_mb`` therefore bounds ``VmData``; allow ~1.2 GB for
-Taichi's pool and libraries on top of what a task really needs (the default, 4 GB, does).
-Not covered: shared mappings and memory of processes the candidate spawns (each inherits its
-own limit). The worker drops its capabilities, so it cannot raise these limits again.
-
-Resource limits are applied by the worker to itself before it reads the candidate, rather than
-in a ``preexec_fn``, because ``preexec_fn`` is unsafe when the parent has threads (as a
-:class:`SandboxPool` does).
+Memory limits
+-------------
+The capture process's address space is limited (``RLIMIT_AS``: ``memory_mb`` beyond what the
+server had mapped), which counts shared mappings too. The fit worker, which loads Taichi,
+limits its *writable private memory* with ``RLIMIT_DATA`` instead: measured with Taichi 1.7 and
+torch 2 on CPU, a process that has initialised Taichi and used torch has ~0.3 GB resident but
+2.25 GB of address space (``ti.init`` alone reserves a 1 GiB pool), so ``RLIMIT_AS`` would fail
+it. Allow ~1.2 GB for Taichi's pool and libraries on top of what a fit needs (the default,
+4 GB, does). The fit runs only trusted code, so its shared mappings are the task's own.
 """
 
 from __future__ import annotations
@@ -56,8 +47,9 @@ import contextlib
 import json
 import math
 import os
-import re
-import selectors
+import queue
+import select
+import shutil
 import signal
 import subprocess
 import sys
@@ -70,7 +62,7 @@ from pathlib import Path
 from typing import Any
 
 from sga_agent.isolation import Isolation, detect_isolation
-from sga_agent.task import Evaluation, EvaluationSettings
+from sga_agent.task import STATUSES, Evaluation, EvaluationSettings
 
 #: Environment variables the worker keeps (besides the prefixes below).
 KEPT_VARIABLES = frozenset(
@@ -94,37 +86,41 @@ KEPT_PREFIXES = ("LC_", "TI_", "CUDA_")
 SECRET_MARKERS = ("KEY", "TOKEN", "SECRET", "PASSWORD", "PASSWD", "CREDENTIAL", "AUTH", "COOKIE")
 SECRET_PREFIXES = ("OPENAI_", "ANTHROPIC_", "AWS_", "AZURE_", "GOOGLE_", "GEMINI_", "HF_")
 
-#: Bytes of the worker's output kept (its end), shown in ``extras["log"]`` of a failure.
+#: Characters of a helper process's log kept (its end), shown in ``extras["log"]`` of a failure.
 LOG_TAIL_CHARS = 4000
 #: Seconds of CPU time granted per thread and second of wall time, plus a fixed margin.
 CPU_TIME_FACTOR = 1.5
 CPU_TIME_MARGIN_S = 5
-#: How often the parent checks whether a worker whose output is still open has exited.
-_POLL_S = 0.1
+#: Seconds a capture server or fit worker may take to start (imports, warm-up captures).
+START_TIMEOUT_S = 600.0
+#: Longest reason taken from a capture process (untrusted text) into an Evaluation.
+MAX_REASON_CHARS = 300
 _READ_CHUNK = 2**16
-#: Output of a worker killed by a signal that points to a failed allocation.
-_ALLOCATION_FAILURE = re.compile(r"bad_alloc|out of memory|cannot allocate memory", re.I)
 
 
 @dataclass(frozen=True)
 class SandboxLimits:
-    """Resources one evaluation may use, and whether its worker is isolated.
+    """Resources one evaluation may use, and whether its capture process is confined.
 
     Parameters
     ----------
     timeout_s : float
-        Wall-clock limit in seconds, worker start-up included; the process group is then killed.
+        Wall-clock limit in seconds of one evaluation, capture and fit together.
     memory_mb : int
-        Limit on the worker's writable private memory (``RLIMIT_DATA``) in MiB. Taichi alone
-        accounts for ~1.1 GiB of it (a reserved memory pool); see the module docstring.
+        Memory limit in MiB: the capture process's address space beyond what its server had
+        mapped, and the fit worker's writable private memory (Taichi alone accounts for
+        ~1.1 GiB of it); see the module docstring.
     file_size_mb : int
-        Largest file the worker may write, in MiB (``RLIMIT_FSIZE``), its result included.
+        Largest file the capture process may write, in MiB (it may write none anyway).
     threads : int
-        Threads for numerical libraries (OpenMP, MKL, OpenBLAS, torch, Taichi's CPU backend).
-        The CPU-time limit is ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
+        Threads of the fit's numerical libraries (OpenMP, torch, Taichi's CPU backend); the
+        capture runs on one. The CPU-time limit of a capture is
+        ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
     isolation : bool
-        Confine the worker as :mod:`sga_agent.isolation` describes (no network, no writes
-        outside its directory and the task caches). Turn it off only to debug a task.
+        Confine the capture process as :mod:`sga_agent.isolation` describes. Turn it off only
+        to debug a task: candidate code then runs with the search's user and files.
+    capture_timeout_s : float
+        Wall-clock limit of the capture step alone (within ``timeout_s``).
     """
 
     timeout_s: float = 900.0
@@ -132,12 +128,15 @@ class SandboxLimits:
     file_size_mb: int = 64
     threads: int = 1
     isolation: bool = True
+    capture_timeout_s: float = 120.0
 
     def __post_init__(self) -> None:
-        if isinstance(self.timeout_s, bool) or not isinstance(self.timeout_s, (int, float)):
-            raise TypeError(f"timeout_s must be a number of seconds, got {self.timeout_s!r}")
-        if not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
-            raise ValueError(f"timeout_s must be a positive, finite number, got {self.timeout_s}")
+        for name in ("timeout_s", "capture_timeout_s"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise TypeError(f"{name} must be a number of seconds, got {value!r}")
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive, finite number, got {value}")
         for name, minimum in (("memory_mb", 64), ("file_size_mb", 1), ("threads", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int):
@@ -153,6 +152,299 @@ class SandboxLimits:
         return math.ceil(CPU_TIME_FACTOR * self.timeout_s * self.threads) + CPU_TIME_MARGIN_S
 
 
+
+class HelperFailure(RuntimeError):
+    """A capture server or fit worker did not start, died or stopped answering."""
+
+
+class _LineProcess:
+    """A helper process answering one JSON line per JSON line sent; its log in a file."""
+
+    def __init__(self, command: list[str], env: dict[str, str], folder: Path, name: str) -> None:
+        self.log_path = folder / f"{name}.log"
+        with open(self.log_path, "wb") as log:
+            self.process = subprocess.Popen(
+                command,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=log,
+                cwd=folder,
+                env=env,
+                start_new_session=True,
+            )
+        self._pending = bytearray()
+
+    def ask(self, message: dict[str, Any] | None, timeout_s: float) -> dict[str, Any]:
+        """Send ``message`` (None: just wait) and return the answer line, parsed.
+
+        Raises :class:`HelperFailure` (after killing the process) when it does not answer in
+        time, exits, or answers something that is not a JSON object.
+        """
+        assert self.process.stdin is not None and self.process.stdout is not None
+        try:
+            if message is not None:
+                self.process.stdin.write((json.dumps(message) + "\n").encode())
+                self.process.stdin.flush()
+            line = self._read_line(time.monotonic() + timeout_s)
+            answer = json.loads(line)
+            if not isinstance(answer, dict):
+                raise ValueError("not a JSON object")
+            return answer
+        except (OSError, ValueError, HelperFailure) as error:
+            self.kill()
+            raise HelperFailure(str(error) or type(error).__name__) from None
+
+    def _read_line(self, deadline: float) -> bytes:
+        assert self.process.stdout is not None
+        fd = self.process.stdout.fileno()
+        while b"\n" not in self._pending:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise HelperFailure("timeout")
+            ready, _, _ = select.select([fd], [], [], remaining)
+            if ready:
+                chunk = os.read(fd, _READ_CHUNK)
+                if not chunk:
+                    raise HelperFailure(self._ended())
+                self._pending += chunk
+        line, _, rest = bytes(self._pending).partition(b"\n")
+        self._pending = bytearray(rest)
+        return line
+
+    def _ended(self) -> str:
+        code = self.process.wait()
+        if code < 0:
+            return f"killed by {_signal_name(-code)}"
+        return f"exited with status {code}"
+
+    @property
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def log_tail(self) -> str:
+        try:
+            text = self.log_path.read_bytes()[-LOG_TAIL_CHARS:]
+        except OSError:
+            return ""
+        return text.decode("utf-8", errors="replace")
+
+    def kill(self) -> None:
+        """SIGKILL the process group, reap the process, close its pipes."""
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(self.process.pid, signal.SIGKILL)
+        self.process.wait()
+        for stream in (self.process.stdin, self.process.stdout):
+            if stream is not None:
+                with contextlib.suppress(OSError):
+                    stream.close()
+
+
+class Evaluator:
+    """One pool slot: a capture server and a trusted fit worker, started when first needed.
+
+    The capture server is kept for as long as the task is the same; the fit worker for as long
+    as the task and the settings' ``options`` are the same (a task may set up its process from
+    them, e.g. the floating-point precision). Helpers that fail are started afresh.
+    """
+
+    def __init__(
+        self, limits: SandboxLimits, extra_python_path: Sequence[str | os.PathLike[str]] = ()
+    ) -> None:
+        self.limits = limits
+        self.extra_python_path = tuple(extra_python_path)
+        self._folder = Path(tempfile.mkdtemp(prefix="sga-sandbox-"))
+        self._capture: tuple[str, _LineProcess] | None = None
+        self._fit: tuple[str, _LineProcess] | None = None
+
+    def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+        """Capture then fit one solution; every failure is an invalid Evaluation."""
+        start = time.monotonic()
+        request = _settings_json(settings)
+        captured = self._captured(task, solution)
+        capture_seconds = time.monotonic() - start
+        if isinstance(captured, Evaluation):
+            evaluation = captured
+        else:
+            remaining = self.limits.timeout_s - capture_seconds
+            evaluation = self._fitted(task, captured, request, remaining)
+        evaluation.seconds = time.monotonic() - start
+        evaluation.extras.setdefault("capture_seconds", round(capture_seconds, 3))
+        return evaluation
+
+    def close(self) -> None:
+        """Stop the helper processes and remove their folder."""
+        for helper in (self._capture, self._fit):
+            if helper is not None:
+                helper[1].kill()
+        self._capture = self._fit = None
+        shutil.rmtree(self._folder, ignore_errors=True)
+
+    # ------------------------------------------------------------------ capture
+
+    def _captured(self, task: str, solution: str) -> dict[str, Any] | Evaluation:
+        try:
+            server = self._capture_server(task)
+        except HelperFailure as error:
+            return Evaluation.invalid(f"the capture server did not start: {error}", status="error")
+        timeout = min(self.limits.capture_timeout_s, self.limits.timeout_s)
+        request = {
+            "solution": solution,
+            "timeout_s": timeout,
+            "limits": asdict(self.limits),
+            "isolation": asdict(detect_isolation()) if self.limits.isolation else None,
+        }
+        try:
+            reply = server.ask(request, timeout + 30)
+        except HelperFailure as error:
+            self._capture = None
+            if str(error) == "timeout":
+                return _failure(f"exceeded the time limit of {timeout:g} s", "timeout", "")
+            return _failure(f"the capture server failed: {error}", "crashed", server.log_tail())
+        return _capture_outcome(reply, self.limits, timeout)
+
+    def _capture_server(self, task: str) -> _LineProcess:
+        if self._capture is not None and self._capture[0] == task and self._capture[1].alive:
+            return self._capture[1]
+        if self._capture is not None:
+            self._capture[1].kill()
+        env = worker_environment(SandboxLimits(threads=1), self.extra_python_path)
+        env["HOME"] = str(self._folder)  # nothing of the user's home is needed to capture
+        command = [sys.executable, "-m", "sga_agent.capture_server", task]
+        server = _LineProcess(command, env, self._folder, "capture")
+        ready = server.ask(None, START_TIMEOUT_S)
+        if not ready.get("ready"):
+            raise HelperFailure(_last_line(server.log_tail()) or "no ready line")
+        self._capture = (task, server)
+        return server
+
+    # ---------------------------------------------------------------------- fit
+
+    def _fitted(
+        self, task: str, data: dict[str, Any], settings: dict[str, Any], remaining: float
+    ) -> Evaluation:
+        if remaining <= 0:
+            return _failure(f"exceeded the time limit of {self.limits.timeout_s:g} s", "timeout", "")
+        key = f"{task}\n{json.dumps(settings['options'], sort_keys=True)}"
+        try:
+            worker = self._fit_worker(task, key)
+        except HelperFailure as error:
+            return Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
+        try:
+            answer = worker.ask({"data": data, "settings": settings}, remaining)
+        except HelperFailure as error:
+            self._fit = None
+            if str(error) == "timeout":
+                reason = f"exceeded the time limit of {self.limits.timeout_s:g} s"
+                return _failure(reason, "timeout", "")
+            return _failure(f"the fit worker failed: {error}", "crashed", worker.log_tail())
+        try:
+            evaluation = Evaluation.from_dict(answer)
+        except (TypeError, ValueError) as error:
+            return Evaluation.invalid(f"unreadable answer of the fit worker: {error}", status="error")
+        if not worker.alive or evaluation.status == "out_of_memory":
+            self._fit = None  # it exits after a failed allocation
+        return evaluation
+
+    def _fit_worker(self, task: str, key: str) -> _LineProcess:
+        if self._fit is not None and self._fit[0] == key and self._fit[1].alive:
+            return self._fit[1]
+        if self._fit is not None:
+            self._fit[1].kill()
+        env = worker_environment(self.limits, self.extra_python_path)
+        command = [sys.executable, "-m", "sga_agent.fit_worker", task, str(self.limits.memory_mb)]
+        worker = _LineProcess(command, env, self._folder, "fit")
+        worker.ask(None, START_TIMEOUT_S)  # not ready: a task that cannot load, each answer says why
+        self._fit = (key, worker)
+        return worker
+
+
+def _capture_outcome(
+    reply: dict[str, Any], limits: SandboxLimits, timeout: float
+) -> dict[str, Any] | Evaluation:
+    """The captured data, or the Evaluation that says why there is none."""
+    status = reply.get("status")
+    log = ""
+    if status == "timeout":
+        return _failure(f"exceeded the time limit of {timeout:g} s", "timeout", log)
+    if status == "error":
+        reason = "not evaluated: the capture process could not be isolated as detected at "
+        return Evaluation.invalid(f"{reason}start-up ({reply.get('detail', '')})", status="error")
+    if status == "crashed":
+        return _crashed(reply, limits)
+    try:
+        outcome = json.loads(reply.get("output", ""))
+        if not isinstance(outcome, dict) or len(outcome) not in (1, 2):
+            raise ValueError("not an outcome")
+    except ValueError:
+        return Evaluation.invalid("the capture process sent back no readable outcome", status="crashed")
+    if "data" in outcome and isinstance(outcome["data"], dict):
+        return outcome["data"]
+    for kind in ("invalid", "out_of_memory", "error"):
+        if isinstance(outcome.get(kind), str):
+            reason = _clean(outcome[kind])
+            if kind == "error":
+                reason = f"capturing the solution raised {reason}"
+            extras = {}
+            if isinstance(outcome.get("traceback"), str):
+                extras["traceback"] = outcome["traceback"][-LOG_TAIL_CHARS:]
+            status = "invalid" if kind == "invalid" else kind
+            return Evaluation.invalid(reason, status=status, extras=extras)
+    return Evaluation.invalid("the capture process sent back no readable outcome", status="crashed")
+
+
+def _crashed(reply: dict[str, Any], limits: SandboxLimits) -> Evaluation:
+    number = int(reply.get("signal") or 0)
+    if number == signal.SIGXCPU:
+        reason = f"killed by SIGXCPU: exceeded the CPU-time limit of {limits.cpu_time_s} s"
+        return Evaluation.invalid(reason, status="timeout")
+    if number == signal.SIGXFSZ:
+        reason = f"killed by SIGXFSZ: exceeded the file-size limit of {limits.file_size_mb} MB"
+        return Evaluation.invalid(reason, status="crashed")
+    if number:
+        description = signal.strsignal(number) or "unknown signal"
+        return Evaluation.invalid(
+            f"the capture process was killed by {_signal_name(number)} ({description})",
+            status="crashed",
+        )
+    code = reply.get("exit_code", 0)
+    return Evaluation.invalid(
+        f"the capture process exited (status {code}) without a result", status="crashed"
+    )
+
+
+def _clean(text: str) -> str:
+    """Untrusted text made one printable line of bounded length."""
+    printable = "".join(ch if ch.isprintable() else " " for ch in text)
+    return printable[:MAX_REASON_CHARS]
+
+
+def _failure(reason: str, status: str, log: str) -> Evaluation:
+    assert status in STATUSES
+    return Evaluation.invalid(reason, status=status, extras={"log": log} if log else {})
+
+
+def _last_line(log: str) -> str:
+    lines = [line.strip() for line in log.splitlines() if line.strip()]
+    return lines[-1] if lines else ""
+
+
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
+def _settings_json(settings: EvaluationSettings) -> dict[str, Any]:
+    """``settings`` as JSON-ready data; ``TypeError`` if its options are not serialisable."""
+    data = asdict(settings)
+    try:
+        json.dumps(data)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"settings.options must be JSON-serialisable: {error}") from error
+    return data
+
+
 def evaluate_in_sandbox(
     task: str,
     solution: str,
@@ -161,7 +453,7 @@ def evaluate_in_sandbox(
     *,
     extra_python_path: Sequence[str | os.PathLike[str]] = (),
 ) -> Evaluation:
-    """Evaluate ``solution`` for ``task`` in a fresh, limited worker process.
+    """Evaluate ``solution`` for ``task``: capture it confined, fit it in a trusted process.
 
     Parameters
     ----------
@@ -170,13 +462,13 @@ def evaluate_in_sandbox(
         zero-argument factory returning a :class:`~sga_agent.task.Task` (a plugin-development
         and testing aid: no entry point needed).
     solution : str
-        The candidate's text (code), passed unchanged to the task's ``evaluate``.
+        The candidate's text (code), passed unchanged to the task's ``capture``.
     settings : EvaluationSettings
         Passed to the task's ``evaluate``; ``options`` must be JSON-serialisable.
     limits : SandboxLimits
-        Time, memory, file-size and thread limits, and whether to isolate the worker.
+        Time, memory, file-size and thread limits, and whether to confine the capture.
     extra_python_path : sequence of path-like
-        Directories put in front of the worker's ``PYTHONPATH`` so that a ``"module:callable"``
+        Directories put in front of the helpers' ``PYTHONPATH`` so that a ``"module:callable"``
         task outside the installed packages can be imported (plugin development, tests).
 
     Returns
@@ -184,20 +476,22 @@ def evaluate_in_sandbox(
     Evaluation
         The task's result, or an invalid one whose ``status`` and ``reason`` say what went wrong
         (see the module docstring); ``seconds`` is the wall time of the whole evaluation.
-        Failures detected here (limits, signals) carry the end of the worker's output in
-        ``extras["log"]``.
 
     Raises
     ------
     TypeError
         ``settings.options`` is not JSON-serialisable (a caller error, not a candidate's).
     """
-    request = _request(task, solution, settings, limits)
-    return _evaluate(request, limits, tuple(extra_python_path))
+    _settings_json(settings)
+    evaluator = Evaluator(limits, extra_python_path)
+    try:
+        return evaluator.evaluate(task, solution, settings)
+    finally:
+        evaluator.close()
 
 
 class SandboxPool:
-    """Evaluate candidates concurrently, each in its own sandbox worker.
+    """Evaluate candidates concurrently: ``max_workers`` slots, each an :class:`Evaluator`.
 
     Identical candidates are the caller's to skip: :func:`~sga_agent.fingerprint.fingerprint`
     tells them apart (the search loop evaluates each fingerprint once, across resumes too).
@@ -227,9 +521,13 @@ class SandboxPool:
         self.limits = limits
         self.extra_python_path = tuple(extra_python_path)
         self._executor = ThreadPoolExecutor(max_workers, thread_name_prefix="sga-sandbox")
+        self._slots: queue.SimpleQueue[Evaluator] = queue.SimpleQueue()
+        self._evaluators = [Evaluator(limits, self.extra_python_path) for _ in range(max_workers)]
+        for evaluator in self._evaluators:
+            self._slots.put(evaluator)
 
     def isolation(self) -> Isolation:
-        """How the workers are isolated, for the run's record."""
+        """How the capture processes are isolated, for the run's record."""
         if not self.limits.isolation:
             return Isolation.none("disabled (SandboxLimits.isolation=False)")
         return detect_isolation()
@@ -240,8 +538,8 @@ class SandboxPool:
         Raises ``TypeError`` at once if ``settings.options`` is not JSON-serialisable; a bad
         candidate never raises: its future holds an invalid Evaluation.
         """
-        request = _request(task, solution, settings, self.limits)
-        return self._executor.submit(self._evaluate, request)
+        _settings_json(settings)
+        return self._executor.submit(self._evaluate, task, solution, settings)
 
     def map(
         self, task: str, solutions: Iterable[str], settings: EvaluationSettings
@@ -251,8 +549,10 @@ class SandboxPool:
         return [future.result() for future in futures]
 
     def close(self) -> None:
-        """Wait for running evaluations and release the threads."""
+        """Wait for running evaluations, then stop every helper process."""
         self._executor.shutdown(wait=True)
+        for evaluator in self._evaluators:
+            evaluator.close()
 
     def __enter__(self) -> SandboxPool:
         return self
@@ -260,12 +560,15 @@ class SandboxPool:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
-    def _evaluate(self, request: bytes) -> Evaluation:
+    def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+        evaluator = self._slots.get()
         try:
-            return _evaluate(request, self.limits, self.extra_python_path)
+            return evaluator.evaluate(task, solution, settings)
         except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
             reason = f"the sandbox failed: {type(error).__name__}: {error}"
             return Evaluation.invalid(reason, status="error")
+        finally:
+            self._slots.put(evaluator)
 
 
 def worker_environment(
@@ -298,186 +601,3 @@ def looks_secret(name: str) -> bool:
     return any(marker in upper for marker in SECRET_MARKERS) or upper.startswith(SECRET_PREFIXES)
 
 
-def _request(
-    task: str, solution: str, settings: EvaluationSettings, limits: SandboxLimits
-) -> bytes:
-    """The worker's request as JSON; ``TypeError`` if ``settings.options`` is not serialisable."""
-    isolation = asdict(detect_isolation()) if limits.isolation else None
-    try:
-        request = {
-            "task": task,
-            "solution": solution,
-            "settings": asdict(settings),
-            "limits": asdict(limits),
-            "isolation": isolation,
-            "parent_pid": os.getpid(),
-        }
-        return json.dumps(request).encode()
-    except (TypeError, ValueError) as error:
-        raise TypeError(f"settings.options must be JSON-serialisable: {error}") from error
-
-
-def _evaluate(
-    request: bytes, limits: SandboxLimits, extra_python_path: Sequence[str | os.PathLike[str]]
-) -> Evaluation:
-    """Run one worker in a fresh temporary directory; its evaluation, timed."""
-    start = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix="sga-sandbox-", ignore_cleanup_errors=True) as root:
-        evaluation = _run_worker(request, Path(root), limits, extra_python_path)
-    evaluation.seconds = time.monotonic() - start
-    return evaluation
-
-
-def _run_worker(
-    request: bytes,
-    root: Path,
-    limits: SandboxLimits,
-    extra_python_path: Sequence[str | os.PathLike[str]],
-) -> Evaluation:
-    """Start the worker in ``root/work``, wait for it, and read or explain its result."""
-    workdir = root / "work"
-    workdir.mkdir()
-    request_path, result_path = root / "request.json", root / "result.json"
-    request_path.write_bytes(request)
-    env = worker_environment(limits, extra_python_path)
-    env["TMPDIR"] = str(workdir)
-    command = [sys.executable, "-m", "sga_agent.worker", str(request_path), str(result_path)]
-    try:
-        process = subprocess.Popen(
-            command,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            cwd=workdir,
-            env=env,
-            start_new_session=True,
-        )
-    except OSError as error:
-        return Evaluation.invalid(f"could not start the sandbox worker: {error}", status="error")
-    output = _OutputTail()
-    try:
-        finished = output.collect(process, time.monotonic() + limits.timeout_s)
-    finally:
-        _kill_group(process)  # also stops anything the candidate left running
-    log = output.text()
-    if not finished:
-        return _failure(f"exceeded the time limit of {limits.timeout_s:g} s", "timeout", log)
-    if process.returncode < 0:
-        return _killed(-process.returncode, limits, log)
-    if process.returncode > 0:
-        reason = f"the sandbox worker exited with status {process.returncode}"
-        return _failure(_with_last_line(reason, log), "crashed", log)
-    return _read_result(result_path, log)
-
-
-class _OutputTail:
-    """The last :data:`LOG_TAIL_CHARS` bytes of a worker's output, and how many came before."""
-
-    def __init__(self) -> None:
-        self._tail = bytearray()
-        self._dropped = 0
-
-    def collect(self, process: subprocess.Popen[bytes], deadline: float) -> bool:
-        """Drain the worker's output until it exits; False if ``deadline`` comes first."""
-        assert process.stdout is not None  # Popen with stdout=PIPE
-        fd = process.stdout.fileno()
-        os.set_blocking(fd, False)
-        with selectors.DefaultSelector() as selector:
-            selector.register(fd, selectors.EVENT_READ)
-            while process.poll() is None:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
-                if selector.select(min(remaining, _POLL_S)) and not self._read(fd):
-                    try:  # the output is closed: only the exit is left to wait for
-                        process.wait(max(0.0, deadline - time.monotonic()))
-                    except subprocess.TimeoutExpired:
-                        return False
-        self._read(fd)  # what it wrote just before exiting
-        return True
-
-    def text(self) -> str:
-        """The kept output, decoded, after a note of how much was dropped."""
-        text = self._tail.decode("utf-8", errors="replace")
-        return f"[{self._dropped} earlier bytes dropped]\n{text}" if self._dropped else text
-
-    def _read(self, fd: int, chunks: int = 16) -> bool:
-        """Read what is available (``chunks`` reads at most); False at the end of the output."""
-        for _ in range(chunks):
-            try:
-                chunk = os.read(fd, _READ_CHUNK)
-            except BlockingIOError:
-                return True
-            if not chunk:
-                return False
-            self._tail += chunk
-            excess = len(self._tail) - LOG_TAIL_CHARS
-            if excess > 0:
-                del self._tail[:excess]
-                self._dropped += excess
-        return True
-
-
-def _kill_group(process: subprocess.Popen[bytes]) -> None:
-    """SIGKILL the worker's process group (its session), reap the worker, close its output."""
-    with contextlib.suppress(ProcessLookupError, PermissionError):  # the group is already gone
-        os.killpg(process.pid, signal.SIGKILL)
-    process.wait()
-    if process.stdout is not None:
-        process.stdout.close()
-
-
-_SIGNAL_CAUSES = {
-    signal.SIGKILL: "possibly the system's out-of-memory killer",
-    signal.SIGABRT: "a native library aborted, possibly on a failed memory allocation",
-    signal.SIGSEGV: "a crash in native code",
-    signal.SIGBUS: "a crash in native code",
-}
-
-
-def _killed(number: int, limits: SandboxLimits, log: str) -> Evaluation:
-    """The evaluation of a worker killed by signal ``number``."""
-    try:
-        name = signal.Signals(number).name
-    except ValueError:
-        name = f"signal {number}"
-    if number == signal.SIGXCPU:
-        reason = f"killed by {name}: exceeded the CPU-time limit of {limits.cpu_time_s} s"
-        return _failure(reason, "timeout", log)
-    if number == signal.SIGXFSZ:
-        reason = f"killed by {name}: exceeded the file-size limit of {limits.file_size_mb} MB"
-        return _failure(reason, "crashed", log)
-    if _ALLOCATION_FAILURE.search(log):
-        reason = f"killed by {name} after a failed allocation (memory limit {limits.memory_mb} MB)"
-        return _failure(reason, "out_of_memory", log)
-    description = signal.strsignal(number) or "unknown signal"
-    cause = _SIGNAL_CAUSES.get(number)
-    reason = f"killed by {name} ({description}{'; ' + cause if cause else ''})"
-    return _failure(reason, "crashed", log)
-
-
-def _read_result(result_path: Path, log: str) -> Evaluation:
-    try:
-        text = result_path.read_text(encoding="utf-8")
-    except OSError:
-        text = ""
-    if not text:  # the worker creates the file first and writes it last
-        reason = "the sandbox worker exited without writing a result"
-        return _failure(_with_last_line(reason, log), "crashed", log)
-    try:
-        data: Any = json.loads(text)
-        evaluation = Evaluation.from_dict(data)
-        if not isinstance(evaluation.valid, bool) or not isinstance(evaluation.reason, str):
-            raise TypeError("'valid' must be a bool and 'reason' a string")
-    except (ValueError, TypeError, AttributeError) as error:
-        return _failure(f"unreadable result from the sandbox worker: {error}", "error", log)
-    return evaluation
-
-
-def _failure(reason: str, status: str, log: str) -> Evaluation:
-    return Evaluation.invalid(reason, status=status, extras={"log": log})
-
-
-def _with_last_line(reason: str, log: str) -> str:
-    lines = [line.strip() for line in log.splitlines() if line.strip()]
-    return f"{reason}: {lines[-1]}" if lines else reason

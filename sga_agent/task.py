@@ -2,9 +2,19 @@
 
 A task plugin (a constitutive-law search, a molecule design, a third party's problem) is an
 object satisfying :class:`Task`. The search only ever sees solutions as text (the code block a
-proposer wrote) and :class:`Evaluation` records; a task's ``evaluate`` runs inside a sandboxed
-worker process, never in the search process. This module has no dependency beyond the standard
-library so that task packages can import it cheaply.
+proposer wrote) and :class:`Evaluation` records. A solution is scored in two steps so that its
+code can never forge its score:
+
+- ``capture(solution) -> data``: the only place where a solution's code may run, in a confined
+  capture process (:mod:`sga_agent.capture_server`). It turns the solution into inert JSON data
+  (a law's graph of tensor operations; a molecule's SMILES and coordinates). Whatever comes out
+  of this step is untrusted.
+- ``evaluate(data, settings) -> Evaluation``: trusted. It runs in a fit process
+  (:mod:`sga_agent.fit_worker`) that never imports or runs solution code; it checks the data
+  and scores it.
+
+This module has no dependency beyond the standard library so that task packages can import it
+cheaply.
 """
 
 from __future__ import annotations
@@ -48,6 +58,10 @@ class EvaluationSettings:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
 
 
+class InvalidSolution(ValueError):
+    """Raised by ``Task.capture`` for a solution that cannot be used; one line for the model."""
+
+
 @dataclass
 class Evaluation:
     """Outcome of evaluating one candidate solution.
@@ -57,7 +71,9 @@ class Evaluation:
     "timeout", "out_of_memory", "crashed"), ``reason`` says why in one line and ``loss`` is inf.
     ``feedback`` is the text shown to the model in later prompts. ``parameters`` are the fitted
     values of the best epoch, ``curves`` maps a name ("loss", a parameter name) to its values
-    over the inner optimization, ``extras`` holds any further JSON-serialisable record.
+    over the inner optimization, ``extras`` holds any further JSON-serialisable record and
+    ``artifacts`` larger data that reports draw from (kept in the candidate's folder, not in the
+    run's event log), such as the best epoch's trajectory.
     """
 
     valid: bool
@@ -69,6 +85,7 @@ class Evaluation:
     extras: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
     status: str = "ok"
+    artifacts: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -145,8 +162,16 @@ class Task(Protocol):
         """Task-specific prompt text."""
         ...
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
-        """Run the inner optimization on ``solution``; never raises for a bad candidate."""
+    def capture(self, solution: str) -> dict[str, Any]:
+        """Turn ``solution`` into JSON data; runs its code, in the capture process only.
+
+        Raises :class:`InvalidSolution` (with a one-line reason) for an unusable solution.
+        """
+        ...
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        """Check the captured ``data`` and score it; never runs solution code, never raises
+        for a bad candidate (its data is untrusted: check everything)."""
         ...
 
 

@@ -1,13 +1,15 @@
-"""Scoring one proposed law: load it, fit it through the simulator, write the feedback.
+"""Scoring one captured law: rebuild it from its graph, fit it through the simulator, report.
 
-Imports Taichi and torch, so it is imported only where a candidate is evaluated (the sandbox
-worker, ``sga-agent evaluate``, tests), never when the search lists tasks.
+Trusted: it never runs a candidate's code, only the checked graph the capture recorded
+(:mod:`tasks.constitutive.law_graph`). Imports Taichi and torch, so it is imported only where a
+candidate is fitted (the fit worker, tests), never when the search lists tasks.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import torch
 
@@ -18,9 +20,11 @@ from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings
 from taichi_mpm import runtime
 from tasks.constitutive import feedback
+from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
 from tasks.constitutive.inner import InnerSettings, NoFiniteEpoch, optimize
-from tasks.constitutive.law_code import LawCodeError, describe_error, load_law
+from tasks.constitutive.law_code import describe_error
+from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.specs import KNOWN_ELASTIC, ConstitutiveSpec
 
 
@@ -44,18 +48,20 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
     return law.requires_grad_(False)
 
 
-def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) -> Evaluation:
-    """Fit the law in ``code`` to the task's observation; invalid results carry a reason.
+def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) -> Evaluation:
+    """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
-    ``settings.options`` may hold ``precision`` ("float32" default, "float64"), ``steps``
-    (a shorter scene, for quick checks) and ``optimizer`` ("adam" default, "lbfgs").
+    Invalid results carry a reason. ``settings.options`` may hold ``precision`` ("float32"
+    default, "float64"), ``steps`` (a shorter scene, for quick checks) and ``optimizer``
+    ("adam" default, "lbfgs"). The artifact ``trajectory`` holds the best epoch's positions
+    (see :mod:`tasks.constitutive.artifacts`).
     """
     started = time.perf_counter()
     ensure_runtime(settings.options.get("precision", "float32"))
     dtype = torch_dtype()
     try:
-        law = load_law(code, dtype)
-    except LawCodeError as error:
+        law = build_law(data.get("law") if isinstance(data, dict) else None, dtype)
+    except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     observed = ground_truth(spec, settings.options.get("steps"))
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
@@ -101,4 +107,5 @@ def evaluate(spec: ConstitutiveSpec, code: str, settings: EvaluationSettings) ->
         extras={"best_epoch": result.best_epoch, "stopped": result.stopped,
                 "epoch_seconds": result.seconds},  # fmt: skip
         seconds=time.perf_counter() - started,
+        artifacts={"trajectory": encode_positions(result.positions)},
     )

@@ -1,7 +1,7 @@
 """Turning a law's source code into a ``Physics`` module, with one-line reasons when it fails.
 
-Runs the code (it is untrusted: call this only inside the sandbox worker) in a fresh module
-namespace, then checks what the prompt asks for: a class ``Physics`` deriving from
+Runs the code (it is untrusted: call this only in the confined capture process, see
+:mod:`tasks.constitutive.law_capture`) in a fresh module namespace, then checks what the prompt asks for: a class ``Physics`` deriving from
 ``torch.nn.Module``, an ``__init__`` whose arguments all have defaults, and
 ``forward(self, F)``.
 """
@@ -14,10 +14,12 @@ import types
 import torch
 from torch import nn
 
+from sga_agent.task import InvalidSolution
+
 CLASS_NAME = "Physics"
 
 
-class LawCodeError(ValueError):
+class LawCodeError(InvalidSolution):
     """The code does not define a usable law; the message is one line for the model."""
 
 
@@ -31,7 +33,7 @@ def load_law(code: str, dtype: torch.dtype) -> nn.Module:
         ) from None
     module = types.ModuleType("law")
     try:
-        exec(compiled, module.__dict__)  # noqa: S102 - sandboxed worker only
+        exec(compiled, module.__dict__)  # noqa: S102 - confined capture process only
     except Exception as error:
         raise LawCodeError(f"running the code raised {describe_error(error)}") from None
     cls = module.__dict__.get(CLASS_NAME)

@@ -1,10 +1,13 @@
 """The constitutive-law tasks as :class:`sga_agent.task.Task` objects.
 
-Listing a task or building its prompt imports neither Taichi nor torch; only ``evaluate``
-does (inside the sandbox worker).
+Listing a task or building its prompt imports neither Taichi nor torch. ``capture`` runs the
+law's code to record it as a graph (in the confined capture process); ``evaluate`` fits that
+graph (in the trusted fit worker, which never runs the law's code).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
 from tasks.constitutive import prompt_text
@@ -15,6 +18,9 @@ class ConstitutiveTask:
     """Search a constitutive law that reproduces an observed MPM trajectory."""
 
     kind = "equation"
+    #: What the capture server loads before it confines a capture (see law_capture).
+    capture_modules = ("numpy", "torch", "torch.nn", "torch.nn.functional", "torch.linalg",
+                       "tasks.constitutive.law_capture")  # fmt: skip
 
     def __init__(self, spec: ConstitutiveSpec) -> None:
         self.spec = spec
@@ -39,10 +45,22 @@ class ConstitutiveTask:
             requirements=prompt_text.PLASTIC_RULES,
         )
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def warm_up_solutions(self) -> list[str]:
+        """The seed and a law using every common operation, captured when a server starts."""
+        from tasks.constitutive.law_capture import WARM_UP_LAW
+
+        return [self.spec.seed, WARM_UP_LAW]
+
+    def capture(self, solution: str) -> dict[str, Any]:
+        """The law's graph (runs its code: capture process only)."""
+        from tasks.constitutive.law_capture import capture_law
+
+        return {"law": capture_law(solution)}
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         from tasks.constitutive.evaluation import evaluate
 
-        return evaluate(self.spec, solution, settings)
+        return evaluate(self.spec, data, settings)
 
     def builtin_proposer(self) -> BuiltinProposer:
         """Genetic programming over law code (no model needed)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from sga_agent.task import (
     BuiltinProposer,
     Evaluation,
@@ -74,10 +76,17 @@ class MoleculeTask:
             requirements=prompt_text.REQUIREMENTS,
         )
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
-        """Score ``solution`` (see :func:`tasks.molecules.evaluation.evaluate_solution`)."""
+    def capture(self, solution: str) -> dict[str, Any]:
+        """The solution's text: it is data already (read with ``ast``, never executed)."""
+        return {"solution": solution}
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        """Score the captured solution (see :func:`.evaluation.evaluate_solution`)."""
         from tasks.molecules.evaluation import evaluate_solution
 
+        solution = data.get("solution") if isinstance(data, dict) else None
+        if not isinstance(solution, str):
+            return Evaluation.invalid("the captured solution is not text", status="error")
         return evaluate_solution(solution, self.prop, self.target, settings)
 
     def builtin_proposer(self) -> BuiltinProposer:

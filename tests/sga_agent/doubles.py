@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import asdict
+from typing import Any
 
 from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
 
@@ -27,19 +28,31 @@ class ExecTask:
     def prompt_parts(self) -> PromptParts:
         return PromptParts(role="tester", context="", template="", requirements="")
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def capture(self, solution: str) -> dict[str, Any]:
         namespace: dict = {}
         exec(solution, namespace)
+        return {
+            "loss": float(namespace.get("loss", 0.0)),
+            "feedback": str(namespace.get("feedback", "ran")),
+            "parameters": dict(namespace.get("parameters", {})),
+            "report": namespace.get("report"),
+            "environ": dict(os.environ),
+            "uid": os.getuid(),
+            "pid": os.getpid(),
+        }
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         return Evaluation(
             valid=True,
-            loss=float(namespace.get("loss", 0.0)),
-            feedback=str(namespace.get("feedback", "ran")),
-            parameters=dict(namespace.get("parameters", {})),
+            loss=data["loss"],
+            feedback=data["feedback"],
+            parameters=data["parameters"],
             extras={
-                "environ": dict(os.environ),
-                "cwd": os.getcwd(),
+                "environ": data["environ"],
+                "uid": data["uid"],
+                "pid": data["pid"],
                 "settings": asdict(settings),
-                "report": namespace.get("report"),
+                "report": data["report"],
             },
         )
 

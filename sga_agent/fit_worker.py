@@ -1,0 +1,109 @@
+"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB``, run by .sandbox.
+
+It scores captured solutions: one request per line of its standard input::
+
+    {"data": <what the task's capture returned>, "settings": {EvaluationSettings fields}}
+
+and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
+It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
+``evaluate`` checks before it uses it. So what it reports can be believed, and it stays warm
+(torch, Taichi, kernels and ground truth loaded) from one candidate to the next.
+
+Its writable private memory is limited (``RLIMIT_DATA``, MEMORY_MB MiB; see :mod:`.sandbox`). A
+failure to allocate becomes an ``out_of_memory`` Evaluation, after which the worker exits so
+that the next candidate gets a fresh process. Prints of the task go to standard error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+import resource
+import sys
+import traceback
+from typing import IO, Any
+
+from sga_agent import registry
+from sga_agent.task import Evaluation, EvaluationSettings, Task
+
+#: Native libraries report a failed allocation as a RuntimeError with one of these phrases.
+_OUT_OF_MEMORY = re.compile(r"allocate memory|memory allocation|out of memory", re.IGNORECASE)
+_MAX_MESSAGE_CHARS = 300
+TRACEBACK_TAIL_CHARS = 4000
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 2:
+        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB", file=sys.stderr)
+        return 2
+    answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
+    os.dup2(2, 1)  # whatever prints goes to standard error, never into the answers
+    memory = int(args[1]) * 2**20
+    resource.setrlimit(resource.RLIMIT_DATA, (memory, memory))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    try:
+        task: Task | None = registry.resolve_task(args[0])
+        failure = None
+    except Exception as error:  # a plugin may fail to import in any way
+        task, failure = None, _from_exception(f"could not load task {args[0]!r}:", error)
+    _answer(answers, {"ready": failure is None})
+    for line in sys.stdin:
+        request = json.loads(line)
+        evaluation = failure or score(task, request["data"], request["settings"])
+        _answer(answers, evaluation.to_dict())
+        if evaluation.status == "out_of_memory":
+            return 0
+    return 0
+
+
+def score(task: Task, data: Any, settings: dict[str, Any]) -> Evaluation:
+    """The task's evaluation of ``data``; every failure becomes an invalid Evaluation."""
+    try:
+        evaluation = task.evaluate(data, EvaluationSettings(**settings))
+    except Exception as error:
+        return _from_exception("evaluation raised", error)
+    if not isinstance(evaluation, Evaluation):
+        return Evaluation.invalid(
+            f"the task returned {type(evaluation).__name__} from evaluate, "
+            "not an sga_agent.task.Evaluation",
+            status="error",
+        )
+    if evaluation.valid and not math.isfinite(evaluation.loss):
+        reason = f"the loss is {evaluation.loss} (numerically unstable)"
+        return dataclasses.replace(
+            evaluation, valid=False, loss=math.inf, reason=reason, status="unstable"
+        )
+    try:
+        json.dumps(evaluation.to_dict())
+    except (TypeError, ValueError) as error:
+        reason = f"the task's Evaluation is not JSON-serialisable: {error}"
+        return Evaluation.invalid(reason, status="error")
+    return evaluation
+
+
+def _from_exception(prefix: str, error: BaseException) -> Evaluation:
+    traceback.clear_frames(error.__traceback__)  # free memory before formatting
+    lines = str(error).strip().splitlines()
+    message = lines[0][:_MAX_MESSAGE_CHARS] if lines else ""
+    described = f"{type(error).__name__}: {message}" if message else type(error).__name__
+    formatted = "".join(traceback.format_exception(error))
+    if len(formatted) > TRACEBACK_TAIL_CHARS:  # keep whole lines from the end
+        formatted = formatted[-TRACEBACK_TAIL_CHARS:].partition("\n")[2]
+    extras = {"traceback": formatted}
+    if isinstance(error, MemoryError) or _OUT_OF_MEMORY.search(str(error)):
+        reason = f"exceeded the fit's memory limit ({described})"
+        return Evaluation.invalid(reason, status="out_of_memory", extras=extras)
+    return Evaluation.invalid(f"{prefix} {described}", status="error", extras=extras)
+
+
+def _answer(answers: IO[str], reply: dict[str, Any]) -> None:
+    answers.write(json.dumps(reply) + "\n")
+    answers.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,350 @@
+"""A captured law as data, and the trusted side that checks it and turns it back into a module.
+
+A proposed law is code, and code can do anything in the process that runs it. So the law runs
+only in the sandboxed capture process (:mod:`tasks.constitutive.law_capture`), which records what
+``Physics.forward`` computes as a graph of ATen operations. This module is the trusted side: it
+reads that graph from plain JSON (loading it executes nothing), checks every part of it, and
+builds a ``torch.nn.Module`` that computes the graph with the law's parameters as
+``nn.Parameter`` s. Nothing of the candidate's code or objects ever reaches it.
+
+The JSON document (``FORMAT`` 1)::
+
+    {"format": 1,
+     "parameters": [{"name": "log_E", "shape": [], "values": [13.0]}, ...],
+     "constants": [{"dtype": "float64", "shape": [3], "values": [...]}, ...],
+     "nodes": [{"op": "aten.mul.Tensor", "args": [...], "kwargs": {...}}, ...],
+     "output": {"node": 41}}
+
+A value in ``args``, ``kwargs`` and ``output`` is a JSON number, boolean, null or list, or one of
+``{"input": 0}`` (the deformation gradient F, (B, 3, 3)), ``{"param": k}``, ``{"constant": k}``,
+``{"node": i}`` (the result of an earlier node), ``{"float": "inf"|"-inf"|"nan"}``,
+``{"dtype": name}``, ``{"device": "cpu"}``, ``{"layout": "strided"}``,
+``{"memory_format": name}`` or ``{"str": text}`` (an einsum equation or a mode: at most 64
+letters, digits and ``,.->_`` or spaces). No other text travels through a graph except parameter
+names, and those are short identifiers.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import fx, nn
+
+from bridges import linalg
+from tasks.constitutive import law_ops
+
+FORMAT = law_ops.GRAPH_FORMAT
+MAX_NODES = 4000
+MAX_PARAMETERS = 64
+MAX_PARAMETER_ELEMENTS = 4096
+MAX_CONSTANTS = 64
+MAX_CONSTANT_ELEMENTS = 100_000
+MAX_NAME_CHARS = 40
+MAX_NESTING = 6
+#: A parameter name: identifiers joined by dots (a submodule's parameter), or list indices.
+NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z0-9_]+)*\Z")
+_INT64 = 2**63
+_REFERENCES = ("input", "param", "constant", "node")
+#: Text an operation may take as an argument (einsum equations, rounding and norm modes).
+ARGUMENT_TEXT = re.compile(r"[A-Za-z0-9_,.\-> ]{0,64}\Z")
+
+
+class LawGraphError(ValueError):
+    """The captured graph is malformed or uses something not allowed; one line for the model."""
+
+
+@dataclass(frozen=True)
+class TensorData:
+    """A tensor as data: its shape and its values, flattened in row-major order."""
+
+    shape: tuple[int, ...]
+    values: tuple[float | int | bool, ...]
+    dtype: str = "float64"
+
+
+@dataclass(frozen=True)
+class LawGraph:
+    """A checked graph: parameters by name, constants, nodes and the output, all inert data."""
+
+    parameters: dict[str, TensorData]
+    constants: list[TensorData]
+    nodes: list[tuple[str, list[Any], dict[str, Any]]]
+    output: Any
+
+    @classmethod
+    def from_json(cls, data: Any) -> LawGraph:
+        """Check ``data`` (a parsed JSON document) completely; :class:`LawGraphError` if bad."""
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise LawGraphError(f"not a captured law graph of format {FORMAT}")
+        parameters = _parameters(data.get("parameters"))
+        constants = _constants(data.get("constants"))
+        raw_nodes = data.get("nodes")
+        if not isinstance(raw_nodes, list):
+            raise LawGraphError("the graph has no list of nodes")
+        if len(raw_nodes) > MAX_NODES:
+            raise LawGraphError(
+                f"the law has {len(raw_nodes)} operations, more than the {MAX_NODES} allowed: "
+                "write it with fewer, batched tensor operations (no Python loops over elements)"
+            )
+        checker = _ValueChecker(len(parameters), len(constants))
+        nodes = []
+        for index, node in enumerate(raw_nodes):
+            if not isinstance(node, dict) or not isinstance(node.get("op"), str):
+                raise LawGraphError(f"node {index} is malformed")
+            op = node["op"]
+            if not law_ops.is_allowed(op):
+                raise LawGraphError(
+                    f"the law uses {_known(op)}, which is not allowed: {law_ops.HINT}"
+                )
+            args, kwargs = node.get("args", []), node.get("kwargs", {})
+            if not isinstance(args, list) or not isinstance(kwargs, dict):
+                raise LawGraphError(f"node {index} is malformed")
+            if not all(isinstance(key, str) and key.isidentifier() for key in kwargs):
+                raise LawGraphError(f"node {index} has a malformed keyword argument")
+            checker.nodes = index
+            checked = {key: checker.check(value) for key, value in kwargs.items()}
+            nodes.append((op, checker.check(args), checked))
+        checker.nodes = len(nodes)
+        output = checker.check(data.get("output"))
+        if not (isinstance(output, dict) and set(output) <= set(_REFERENCES)):
+            raise LawGraphError("the law's output is not a tensor")
+        return cls(parameters, constants, nodes, output)
+
+
+def build_law(data: Any, dtype: torch.dtype) -> GraphLaw:
+    """The module computing the captured law ``data``, its floats in ``dtype``."""
+    return GraphLaw(LawGraph.from_json(data), dtype)
+
+
+class GraphLaw(nn.Module):
+    """A law rebuilt from its checked graph: ``forward(F)`` runs the graph's operations.
+
+    Parameters keep the names the law gave them (``named_parameters()`` lists them in the
+    captured order). The operations are turned into a ``torch.fx.GraphModule`` whose code is
+    generated from the allowed operations and numeric literals only.
+    """
+
+    def __init__(self, graph: LawGraph, dtype: torch.dtype) -> None:
+        super().__init__()
+        holder = nn.Module()
+        for index, constant in enumerate(graph.constants):
+            holder.register_buffer(f"c{index}", _tensor(constant, dtype))
+        self.graph_constants = holder
+        for name, tensor in graph.parameters.items():
+            self._add_parameter(name, nn.Parameter(_tensor(tensor, dtype)))
+        object.__setattr__(self, "_code", _compile(self, graph, dtype))
+
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        return self._code(F)
+
+    def _add_parameter(self, name: str, parameter: nn.Parameter) -> None:
+        *path, leaf = name.split(".")
+        owner: nn.Module = self
+        for part in path:
+            child = owner._modules.get(part)
+            if child is None:
+                if hasattr(owner, part):
+                    raise LawGraphError(f"parameter {name!r} clashes with a module attribute")
+                child = nn.Module()
+                owner.add_module(part, child)
+            owner = child
+        try:
+            owner.register_parameter(leaf, parameter)
+        except (KeyError, TypeError) as error:
+            raise LawGraphError(f"parameter {name!r} cannot be registered: {error}") from None
+
+
+def _compile(law: GraphLaw, graph: LawGraph, dtype: torch.dtype) -> fx.GraphModule:
+    built = fx.Graph()
+    inputs = {"input": [built.placeholder("F")]}
+    inputs["param"] = [built.get_attr(name) for name in graph.parameters]
+    inputs["constant"] = [
+        built.get_attr(f"graph_constants.c{i}") for i in range(len(graph.constants))
+    ]
+    inputs["node"] = []
+
+    def resolve(value: Any) -> Any:
+        if isinstance(value, list):
+            return [resolve(item) for item in value]
+        if isinstance(value, dict):
+            ((kind, payload),) = value.items()
+            if kind in _REFERENCES:
+                return inputs[kind][payload]
+            return _literal(kind, payload, dtype)
+        return value
+
+    for op, args, kwargs in graph.nodes:
+        target = _target(op)
+        node = built.call_function(
+            target, tuple(resolve(arg) for arg in args), {k: resolve(v) for k, v in kwargs.items()}
+        )
+        inputs["node"].append(node)
+    built.output(resolve(graph.output))
+    return fx.GraphModule(law, built, class_name="CapturedLaw")
+
+
+def _target(op: str) -> Any:
+    """The callable of an allowed operation name (checked by :func:`law_ops.is_allowed`)."""
+    if op in law_ops.PYTHON_OPS:
+        return law_ops.PYTHON_OPS[op]
+    _, name, overload_name = op.split(".")
+    if name == "_linalg_svd":
+        return stable_svd
+    name = law_ops.ZERO_FILLED.get(name, name)
+    try:
+        overload = getattr(getattr(torch.ops.aten, name), overload_name)
+    except AttributeError:
+        raise LawGraphError("the graph names an operation torch does not have") from None
+    if overload._schema.is_mutable:
+        raise LawGraphError(f"{op} writes into its arguments, which is not allowed")
+    return overload
+
+
+def stable_svd(
+    A: torch.Tensor, full_matrices: bool = True, compute_uv: bool = True, driver: Any = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``aten._linalg_svd`` with :func:`bridges.linalg.svd`'s stable gradient for 3x3 inputs."""
+    if compute_uv and driver is None and A.shape[-2:] == (3, 3) and A.dtype.is_floating_point:
+        return linalg.svd(A, signed=False)
+    return torch.ops.aten._linalg_svd.default(A, full_matrices, compute_uv, driver=driver)
+
+
+def _literal(kind: str, payload: str, dtype: torch.dtype) -> Any:
+    if kind == "float":
+        return float(payload)
+    if kind == "str":
+        return payload
+    if kind == "dtype":
+        return dtype if payload in law_ops.FLOAT_DTYPES else getattr(torch, payload)
+    if kind == "device":
+        return torch.device(payload)
+    if kind == "layout":
+        return torch.strided
+    return getattr(torch, payload)  # memory_format, checked against law_ops.MEMORY_FORMATS
+
+
+def _tensor(data: TensorData, dtype: torch.dtype) -> torch.Tensor:
+    kind = dtype if data.dtype in law_ops.FLOAT_DTYPES else getattr(torch, data.dtype)
+    return torch.tensor(data.values, dtype=kind).reshape(data.shape)
+
+
+def _known(op: str) -> str:
+    """``op`` if it names a real ATen operation, else a description (no text of the graph's)."""
+    parts = op.split(".")
+    if len(parts) == 3 and parts[0] == "aten" and len(op) <= 80:
+        packet = getattr(torch.ops.aten, parts[1], None) if parts[1].isidentifier() else None
+        if packet is not None and parts[2] in packet.overloads():
+            return op
+    return "an operation that is not an ATen operation"
+
+
+# ------------------------------------------------------------------------------ checking
+
+
+class _ValueChecker:
+    """Checks argument values: literals of allowed kinds, references to earlier values."""
+
+    def __init__(self, parameters: int, constants: int) -> None:
+        self.limits = {"input": 1, "param": parameters, "constant": constants}
+        self.nodes = 0
+
+    def check(self, value: Any, depth: int = 0) -> Any:
+        if depth > MAX_NESTING:
+            raise LawGraphError("an argument is nested too deeply")
+        if value is None or isinstance(value, bool):
+            return value
+        if isinstance(value, int):
+            if not -_INT64 <= value < _INT64:
+                raise LawGraphError("an integer argument is out of the 64-bit range")
+            return value
+        if isinstance(value, float):
+            if not math.isfinite(value):
+                raise LawGraphError("a non-finite float must be written as {'float': ...}")
+            return value
+        if isinstance(value, list):
+            return [self.check(item, depth + 1) for item in value]
+        if isinstance(value, dict) and len(value) == 1:
+            ((kind, payload),) = value.items()
+            self._check_tagged(kind, payload)
+            return value
+        raise LawGraphError("an argument is of a kind a law graph cannot hold")
+
+    def _check_tagged(self, kind: Any, payload: Any) -> None:
+        if kind in _REFERENCES:
+            limit = self.nodes if kind == "node" else self.limits[kind]
+            if isinstance(payload, bool) or not isinstance(payload, int):
+                raise LawGraphError(f"a {kind} reference is not an index")
+            if not 0 <= payload < limit:
+                raise LawGraphError(f"a {kind} reference points outside the graph")
+            return
+        if kind == "str":
+            if not (isinstance(payload, str) and ARGUMENT_TEXT.match(payload)):
+                raise LawGraphError("a text argument is not an equation or a mode")
+            return
+        allowed = {
+            "float": ("inf", "-inf", "nan"),
+            "dtype": law_ops.DTYPES,
+            "device": ("cpu",),
+            "layout": law_ops.LAYOUTS,
+            "memory_format": law_ops.MEMORY_FORMATS,
+        }.get(kind)
+        if allowed is None or payload not in allowed:
+            raise LawGraphError("an argument has an unknown tag or value")
+
+
+def _parameters(raw: Any) -> dict[str, TensorData]:
+    if not isinstance(raw, list):
+        raise LawGraphError("the graph has no list of parameters")
+    if len(raw) > MAX_PARAMETERS:
+        raise LawGraphError(f"the law has {len(raw)} parameters, more than {MAX_PARAMETERS}")
+    parameters: dict[str, TensorData] = {}
+    total = 0
+    for index, item in enumerate(raw):
+        name = item.get("name") if isinstance(item, dict) else None
+        if not (isinstance(name, str) and len(name) <= MAX_NAME_CHARS and NAME.match(name)):
+            raise LawGraphError(
+                f"parameter {index + 1}'s name is not a Python identifier of at most "
+                f"{MAX_NAME_CHARS} characters: name parameters like log_youngs_modulus"
+            )
+        if name in parameters:
+            raise LawGraphError(f"parameter {name!r} appears twice")
+        tensor = _tensor_data(item, floats_only=True)
+        total += len(tensor.values)
+        if total > MAX_PARAMETER_ELEMENTS:
+            raise LawGraphError(f"the law has more than {MAX_PARAMETER_ELEMENTS} parameter values")
+        parameters[name] = tensor
+    return parameters
+
+
+def _constants(raw: Any) -> list[TensorData]:
+    if not isinstance(raw, list) or len(raw) > MAX_CONSTANTS:
+        raise LawGraphError(f"the graph needs a list of at most {MAX_CONSTANTS} constants")
+    constants = [_tensor_data(item, floats_only=False) for item in raw]
+    if sum(len(c.values) for c in constants) > MAX_CONSTANT_ELEMENTS:
+        raise LawGraphError(
+            f"the law's constant tensors hold more than {MAX_CONSTANT_ELEMENTS} values"
+        )
+    return constants
+
+
+def _tensor_data(item: Any, floats_only: bool) -> TensorData:
+    if not isinstance(item, dict):
+        raise LawGraphError("a tensor of the graph is malformed")
+    shape, values = item.get("shape"), item.get("values")
+    dtype = item.get("dtype", "float64")
+    if not (isinstance(shape, list) and all(type(n) is int and 0 <= n for n in shape)):
+        raise LawGraphError("a tensor of the graph has a malformed shape")
+    if not isinstance(values, list) or len(values) != math.prod(shape):
+        raise LawGraphError("a tensor of the graph does not hold as many values as its shape")
+    if dtype not in law_ops.DTYPES or (floats_only and dtype not in law_ops.FLOAT_DTYPES):
+        raise LawGraphError("a tensor of the graph has a dtype that is not allowed")
+    for value in values:
+        if not isinstance(value, (int, float)) or (
+            isinstance(value, float) and not math.isfinite(value)
+        ):
+            raise LawGraphError("a tensor of the graph holds a value that is not a finite number")
+    return TensorData(tuple(shape), tuple(values), dtype)
