@@ -31,14 +31,15 @@ from dataclasses import asdict
 from typing import IO, Any
 
 from sga_agent import registry
-from sga_agent.isolation import Isolation, run_confined
+from sga_agent.isolation import Isolation, die_with_parent, run_confined
 from sga_agent.sandbox import SandboxLimits
 from sga_agent.task import InvalidSolution, Task
 
 #: Imported before any capture (with the task's ``capture_modules``): a confined process may be
 #: unable to read the files to import them later (as ``nobody``, Python under /root, say).
 PRELOADED = ("math", "cmath", "numbers", "functools", "itertools", "collections", "typing",
-             "dataclasses", "enum", "abc", "operator", "random", "json")  # fmt: skip
+             "dataclasses", "enum", "abc", "operator", "random", "json",
+             "encodings.idna")  # fmt: skip
 MAX_REASON_CHARS = 300
 TRACEBACK_TAIL_CHARS = 2000
 
@@ -48,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) != 1:
         print("usage: python -m sga_agent.capture_server TASK", file=sys.stderr)
         return 2
+    die_with_parent()  # a helper never outlives the evaluator that started it
     answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
     os.dup2(2, 1)  # whatever prints goes to standard error, never into the answers
     task = registry.resolve_task(args[0])

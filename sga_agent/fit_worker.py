@@ -27,6 +27,7 @@ import traceback
 from typing import IO, Any
 
 from sga_agent import registry
+from sga_agent.isolation import die_with_parent
 from sga_agent.task import Evaluation, EvaluationSettings, Task
 
 #: Native libraries report a failed allocation as a RuntimeError with one of these phrases.
@@ -40,6 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) != 2:
         print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB", file=sys.stderr)
         return 2
+    die_with_parent()  # a helper never outlives the evaluator that started it
     answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
     os.dup2(2, 1)  # whatever prints goes to standard error, never into the answers
     memory = int(args[1]) * 2**20

@@ -274,11 +274,12 @@ def _confined(work, result_write, control_write, isolate, namespaces, memory_mb,
     libc = ctypes.CDLL(None, use_errno=True)
     middle = os.getppid()  # 0 as seen from inside a new PID namespace
     _die_with(libc, middle)
+    os.setsid()  # no signal to its old process group reaches the server
     null = os.open(os.devnull, os.O_RDWR)
     for fd in (0, 1, 2):
         os.dup2(null, fd)
     keep = sorted({0, 1, 2, result_write, control_write})
-    for low, high in zip(keep, keep[1:] + [os.sysconf("SC_OPEN_MAX")]):
+    for low, high in zip(keep, [*keep[1:], os.sysconf("SC_OPEN_MAX")], strict=True):
         os.closerange(low + 1, high)
     if isolate:
         isolation = confine(libc, namespaces, memory_mb, cpu_time_s, file_size_mb)
@@ -290,6 +291,12 @@ def _confined(work, result_write, control_write, isolate, namespaces, memory_mb,
     os.close(control_write)
     _write_all(result_write, work())
     os._exit(0)
+
+
+def die_with_parent() -> None:
+    """Have the kernel kill this process when its parent dies (Linux; elsewhere nothing)."""
+    if sys.platform.startswith("linux"):
+        _die_with(ctypes.CDLL(None, use_errno=True), os.getppid())
 
 
 def _die_with(libc: ctypes.CDLL, parent: int) -> None:

@@ -1,10 +1,11 @@
 """Evaluating candidates on a Ray cluster: :class:`RayPool`, the distributed twin of SandboxPool.
 
 Each evaluation is a Ray task that calls :func:`~sga_agent.sandbox.evaluate_in_sandbox` on the
-node Ray schedules it on, so it runs in the same sandboxed worker process as on this machine,
-with the same limits, isolation, timeouts and outcomes. Ray picks the node from the resources
-each task reserves (``cpus_per_task``, ``memory_mb``); every node needs this project installed
-at the same version (and the path of ``extra_python_path``, if any).
+node Ray schedules it on, so it is captured in the same confined process and fitted by the
+same trusted fit worker as on this machine, with the same limits, isolation, timeouts and
+outcomes (the helpers start afresh for each evaluation there, not warm). Ray picks the node
+from the resources each task reserves (``cpus_per_task``, ``memory_mb``); every node needs this
+project installed at the same version (and the path of ``extra_python_path``, if any).
 
 Failures
 --------
@@ -37,7 +38,7 @@ from types import ModuleType
 from typing import Any
 
 from sga_agent.isolation import Isolation, detect_isolation
-from sga_agent.sandbox import SandboxLimits, _request, evaluate_in_sandbox
+from sga_agent.sandbox import SandboxLimits, _settings_json, evaluate_in_sandbox
 from sga_agent.task import Evaluation, EvaluationSettings
 
 #: How to install the optional dependency.
@@ -174,7 +175,7 @@ class RayPool:
         candidate or a lost Ray task never raises: its future holds an invalid Evaluation
         (only the loss of this machine's Ray node makes it raise :class:`RayClusterLostError`).
         """
-        _request(task, solution, settings, self.limits)  # the sandbox's own check, here
+        _settings_json(settings)  # the sandbox's own check, here
         reference = self._evaluate.remote(
             task, solution, settings, self.limits, self.extra_python_path
         )

@@ -5,7 +5,8 @@ Layout of ``runs/<id>/``::
     config.json            the resolved SearchConfig
     events.jsonl           one JSON object per line, flushed and fsynced per event
     candidates/<id>/       messages.json, response.txt, proposal.json, code.py,
-                           evaluation.json, feedback.txt, curves.json
+                           evaluation.json, feedback.txt, curves.json, artifacts.json (what
+                           the trusted fit left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
     summary.json           written when the run ends
 
@@ -28,6 +29,8 @@ from sga_agent.config import SearchConfig
 from sga_agent.task import Evaluation
 
 CONFIG, EVENTS, SUMMARY = "config.json", "events.jsonl", "summary.json"
+#: A candidate's artifacts (what the trusted fit left for reports), beside its evaluation.
+ARTIFACTS = "artifacts.json"
 
 
 class RunStoreError(RuntimeError):
@@ -127,9 +130,7 @@ class RunStore:
             if kind == "proposal":
                 recorded.proposals[event["candidate"]] = event["proposal"]
             elif kind == "evaluation":
-                recorded.evaluations[event["candidate"]] = Evaluation.from_dict(
-                    event["evaluation"]
-                )
+                recorded.evaluations[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
             elif kind == "run_finished":
                 recorded.finished = True
         return recorded
@@ -156,8 +157,11 @@ class RunStore:
             (folder / "code.py").write_text(code, encoding="utf-8")
         data = evaluation.to_dict()
         curves = data.pop("curves")
+        artifacts = data.pop("artifacts")
         _dump(folder / "evaluation.json", data)
         _dump(folder / "curves.json", curves)
+        if artifacts:
+            _dump(folder / ARTIFACTS, artifacts)
         (folder / "feedback.txt").write_text(evaluation.feedback, encoding="utf-8")
 
     def save_heap(self, iteration: int, top: list[dict[str, Any]]) -> None:

@@ -80,6 +80,8 @@ KEPT_VARIABLES = frozenset(
         "LD_LIBRARY_PATH",
     }
 )
+#: Variables naming caches, which the fit uses and the capture is not told about.
+CACHE_VARIABLES = ("SGA_CACHE_DIR", "XDG_CACHE_HOME", "TI_OFFLINE_CACHE_FILE_PATH")
 #: Prefixes of further kept variables (locale, Taichi settings, CUDA device selection).
 KEPT_PREFIXES = ("LC_", "TI_", "CUDA_")
 #: A variable whose name contains one of these (upper-cased) is dropped even if kept above.
@@ -93,6 +95,8 @@ CPU_TIME_FACTOR = 1.5
 CPU_TIME_MARGIN_S = 5
 #: Seconds a capture server or fit worker may take to start (imports, warm-up captures).
 START_TIMEOUT_S = 600.0
+#: Seconds a helper may take to exit once its input is closed (Taichi writes its cache then).
+CLOSE_TIMEOUT_S = 60.0
 #: Longest reason taken from a capture process (untrusted text) into an Evaluation.
 MAX_REASON_CHARS = 300
 _READ_CHUNK = 2**16
@@ -150,7 +154,6 @@ class SandboxLimits:
     def cpu_time_s(self) -> int:
         """Soft CPU-time limit (``RLIMIT_CPU``) in seconds, a backstop to the wall-clock one."""
         return math.ceil(CPU_TIME_FACTOR * self.timeout_s * self.threads) + CPU_TIME_MARGIN_S
-
 
 
 class HelperFailure(RuntimeError):
@@ -228,6 +231,18 @@ class _LineProcess:
             return ""
         return text.decode("utf-8", errors="replace")
 
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+        """End the process by closing its input, so that it exits normally (Taichi writes its
+        kernel cache at exit); SIGKILL it if it has not exited after ``timeout_s``."""
+        with contextlib.suppress(OSError):
+            if self.process.stdin is not None:
+                self.process.stdin.close()
+        try:
+            self.process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            pass
+        self.kill()
+
     def kill(self) -> None:
         """SIGKILL the process group, reap the process, close its pipes."""
         with contextlib.suppress(ProcessLookupError, PermissionError):
@@ -239,7 +254,7 @@ class _LineProcess:
                     stream.close()
 
 
-class Evaluator:
+class EvaluationSlot:
     """One pool slot: a capture server and a trusted fit worker, started when first needed.
 
     The capture server is kept for as long as the task is the same; the fit worker for as long
@@ -272,10 +287,10 @@ class Evaluator:
         return evaluation
 
     def close(self) -> None:
-        """Stop the helper processes and remove their folder."""
+        """Stop the helper processes (letting them exit normally) and remove their folder."""
         for helper in (self._capture, self._fit):
             if helper is not None:
-                helper[1].kill()
+                helper[1].close()
         self._capture = self._fit = None
         shutil.rmtree(self._folder, ignore_errors=True)
 
@@ -308,12 +323,18 @@ class Evaluator:
         if self._capture is not None:
             self._capture[1].kill()
         env = worker_environment(SandboxLimits(threads=1), self.extra_python_path)
-        env["HOME"] = str(self._folder)  # nothing of the user's home is needed to capture
+        for name in CACHE_VARIABLES:  # a capture needs no cache: it finds none
+            env.pop(name, None)
+        env["HOME"] = str(self._folder)
+        env["PYTHONSAFEPATH"] = "1"  # the working directory is not importable, nor readable
         command = [sys.executable, "-m", "sga_agent.capture_server", task]
         server = _LineProcess(command, env, self._folder, "capture")
-        ready = server.ask(None, START_TIMEOUT_S)
+        try:
+            ready = server.ask(None, START_TIMEOUT_S)
+        except HelperFailure as error:
+            raise HelperFailure(_last_line(server.log_tail()) or str(error)) from None
         if not ready.get("ready"):
-            raise HelperFailure(_last_line(server.log_tail()) or "no ready line")
+            raise HelperFailure("no ready line")
         self._capture = (task, server)
         return server
 
@@ -323,7 +344,9 @@ class Evaluator:
         self, task: str, data: dict[str, Any], settings: dict[str, Any], remaining: float
     ) -> Evaluation:
         if remaining <= 0:
-            return _failure(f"exceeded the time limit of {self.limits.timeout_s:g} s", "timeout", "")
+            return _failure(
+                f"exceeded the time limit of {self.limits.timeout_s:g} s", "timeout", ""
+            )
         key = f"{task}\n{json.dumps(settings['options'], sort_keys=True)}"
         try:
             worker = self._fit_worker(task, key)
@@ -340,20 +363,26 @@ class Evaluator:
         try:
             evaluation = Evaluation.from_dict(answer)
         except (TypeError, ValueError) as error:
-            return Evaluation.invalid(f"unreadable answer of the fit worker: {error}", status="error")
+            return Evaluation.invalid(
+                f"unreadable answer of the fit worker: {error}", status="error"
+            )
         if not worker.alive or evaluation.status == "out_of_memory":
             self._fit = None  # it exits after a failed allocation
+        evaluation.artifacts["captured"] = data  # what was fitted, for an honest re-evaluation
         return evaluation
 
     def _fit_worker(self, task: str, key: str) -> _LineProcess:
         if self._fit is not None and self._fit[0] == key and self._fit[1].alive:
             return self._fit[1]
         if self._fit is not None:
-            self._fit[1].kill()
+            self._fit[1].close()
         env = worker_environment(self.limits, self.extra_python_path)
         command = [sys.executable, "-m", "sga_agent.fit_worker", task, str(self.limits.memory_mb)]
         worker = _LineProcess(command, env, self._folder, "fit")
-        worker.ask(None, START_TIMEOUT_S)  # not ready: a task that cannot load, each answer says why
+        try:  # not ready: a task that cannot load, each answer says why
+            worker.ask(None, START_TIMEOUT_S)
+        except HelperFailure as error:
+            raise HelperFailure(_last_line(worker.log_tail()) or str(error)) from None
         self._fit = (key, worker)
         return worker
 
@@ -376,7 +405,9 @@ def _capture_outcome(
         if not isinstance(outcome, dict) or len(outcome) not in (1, 2):
             raise ValueError("not an outcome")
     except ValueError:
-        return Evaluation.invalid("the capture process sent back no readable outcome", status="crashed")
+        return Evaluation.invalid(
+            "the capture process sent back no readable outcome", status="crashed"
+        )
     if "data" in outcome and isinstance(outcome["data"], dict):
         return outcome["data"]
     for kind in ("invalid", "out_of_memory", "error"):
@@ -384,6 +415,8 @@ def _capture_outcome(
             reason = _clean(outcome[kind])
             if kind == "error":
                 reason = f"capturing the solution raised {reason}"
+            elif kind == "out_of_memory":
+                reason = f"exceeded the capture's memory limit of {limits.memory_mb} MB ({reason})"
             extras = {}
             if isinstance(outcome.get("traceback"), str):
                 extras["traceback"] = outcome["traceback"][-LOG_TAIL_CHARS:]
@@ -483,7 +516,7 @@ def evaluate_in_sandbox(
         ``settings.options`` is not JSON-serialisable (a caller error, not a candidate's).
     """
     _settings_json(settings)
-    evaluator = Evaluator(limits, extra_python_path)
+    evaluator = EvaluationSlot(limits, extra_python_path)
     try:
         return evaluator.evaluate(task, solution, settings)
     finally:
@@ -491,7 +524,7 @@ def evaluate_in_sandbox(
 
 
 class SandboxPool:
-    """Evaluate candidates concurrently: ``max_workers`` slots, each an :class:`Evaluator`.
+    """Evaluate candidates concurrently: ``max_workers`` slots, each an :class:`EvaluationSlot`.
 
     Identical candidates are the caller's to skip: :func:`~sga_agent.fingerprint.fingerprint`
     tells them apart (the search loop evaluates each fingerprint once, across resumes too).
@@ -521,8 +554,10 @@ class SandboxPool:
         self.limits = limits
         self.extra_python_path = tuple(extra_python_path)
         self._executor = ThreadPoolExecutor(max_workers, thread_name_prefix="sga-sandbox")
-        self._slots: queue.SimpleQueue[Evaluator] = queue.SimpleQueue()
-        self._evaluators = [Evaluator(limits, self.extra_python_path) for _ in range(max_workers)]
+        self._slots: queue.SimpleQueue[EvaluationSlot] = queue.SimpleQueue()
+        self._evaluators = [
+            EvaluationSlot(limits, self.extra_python_path) for _ in range(max_workers)
+        ]
         for evaluator in self._evaluators:
             self._slots.put(evaluator)
 
@@ -599,5 +634,3 @@ def looks_secret(name: str) -> bool:
     """Whether an environment variable's name suggests a credential."""
     upper = name.upper()
     return any(marker in upper for marker in SECRET_MARKERS) or upper.startswith(SECRET_PREFIXES)
-
-

@@ -30,8 +30,9 @@ SEED = "00-seed"
 class Evaluator(Protocol):
     """Evaluates solutions of a task concurrently (the sandbox pool, or a test double)."""
 
-    def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
-        ...
+    def submit(
+        self, task: str, solution: str, settings: EvaluationSettings
+    ) -> Future[Evaluation]: ...
 
 
 @dataclass
@@ -259,8 +260,8 @@ class Search:
         if not stored:
             self._evaluations[candidate] = evaluation
             self.store.save_evaluation(candidate, code, evaluation)
-            self._emit({"type": "evaluation", "candidate": candidate,
-                        "evaluation": evaluation.to_dict()})  # fmt: skip
+            event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
+            self._emit({"type": "evaluation", "candidate": candidate, "evaluation": event})
         self.totals.evaluations += "duplicate_of" not in evaluation.extras
         if evaluation.valid:
             self.totals.valid += 1

@@ -201,5 +201,4 @@ class BuiltinProposer(Protocol):
 
     def propose_from(
         self, parents: Sequence[Parent], temperature: float, n: int, seed: int
-    ) -> list[str]:
-        ...
+    ) -> list[str]: ...

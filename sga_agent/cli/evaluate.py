@@ -1,4 +1,7 @@
-"""``sga-agent evaluate``: score one solution file in the sandbox, as the search does."""
+"""``sga-agent evaluate``: score one solution file as the search does.
+
+The same path as a search's candidate: the static checks, the confined capture, the trusted fit.
+"""
 
 from __future__ import annotations
 
@@ -12,8 +15,10 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.options import task_options, task_or_factory
+from sga_agent.parsing import CodeRejected, check_code
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
 from sga_agent.task import Evaluation, EvaluationSettings
 
@@ -76,7 +81,7 @@ def extract_solution(text: str) -> str:
     type=click.IntRange(min=64),
     default=_DEFAULTS.memory_mb,
     show_default=True,
-    help="Limit on the worker's memory in MiB (Taichi alone takes about 1.2 GiB of it).",
+    help="Memory limit in MiB of the capture and of the fit (Taichi alone takes about 1.2 GiB).",
 )
 def evaluate(
     task_name: str,
@@ -88,12 +93,13 @@ def evaluate(
     timeout_s: float,
     memory_mb: int,
 ) -> None:
-    """Score the solution in FILE for a task, in the sandbox.
+    """Score the solution in FILE for a task, exactly as the search does.
 
-    The evaluation runs exactly as in the search. FILE is a solution (a law's .py file, a
-    molecule block) or a model's answer, whose last ```python block is then used. Prints the
-    fitted parameters, the loss and the feedback; an invalid solution prints its reason to
-    stderr and exits with status 1.
+    The code passes the search's static checks, runs only in the confined capture process, and
+    is fitted by a trusted process from what the capture recorded. FILE is a solution (a law's
+    .py file, a molecule block) or a model's answer, whose last ```python block is then used.
+    Prints the fitted parameters, the loss and the feedback; an invalid solution prints its
+    reason to stderr and exits with status 1.
     """
     try:
         text = file.read_text(encoding="utf-8")
@@ -102,9 +108,15 @@ def evaluate(
     limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
     settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=options)
     extra_path = [Path.cwd()] if ":" in task_name else []
-    evaluation = evaluate_in_sandbox(
-        task_name, extract_solution(text), settings, limits, extra_python_path=extra_path
-    )
+    solution = extract_solution(text)
+    try:
+        check_code(solution, _kind(task_name, extra_path))
+    except CodeRejected as error:
+        evaluation = Evaluation.invalid(f"the code breaks the rules: {error}")
+    else:
+        evaluation = evaluate_in_sandbox(
+            task_name, solution, settings, limits, extra_python_path=extra_path
+        )
     if as_json:
         click.echo(evaluation.to_json())
     elif evaluation.valid:
@@ -112,6 +124,15 @@ def evaluate(
     if not evaluation.valid:
         click.echo(f"invalid: {evaluation.reason}", err=True)
         sys.exit(1)
+
+
+def _kind(task_name: str, extra_path: list[Path]) -> str:
+    """The task's kind, for the static checks (a factory's module is imported from here)."""
+    sys.path[:0] = [str(path) for path in extra_path]
+    try:
+        return registry.resolve_task(task_name).kind
+    finally:
+        del sys.path[: len(extra_path)]
 
 
 def _show(evaluation: Evaluation) -> None:

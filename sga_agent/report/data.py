@@ -24,6 +24,11 @@ class Candidate:
     code: str = ""
     feedback: str = ""
     curves: dict[str, list[float]] = field(default_factory=dict)
+    folder: Path | None = None
+
+    def artifacts(self) -> dict[str, Any]:
+        """What the trusted fit left for reports (read when asked: it can be large)."""
+        return _read_json(self.folder / "artifacts.json", {}) if self.folder else {}
 
     @property
     def iteration(self) -> int:
@@ -89,6 +94,7 @@ def read_candidate(folder: Path) -> Candidate | None:
         code=_read_text(folder / "code.py"),
         feedback=_read_text(folder / "feedback.txt"),
         curves=_read_json(folder / "curves.json", {}),
+        folder=folder,
     )
 
 

@@ -20,7 +20,7 @@ LOSS_LABELS = {
     "constitutive": "loss: mean squared position error (m²)",
     "molecules": "loss (dimensionless, normalised property)",
 }
-MOTION_FRAMES, GIF_FRAMES, GIF_FPS = 4, 30, 10
+MOTION_FRAMES, GIF_FPS = 4, 10
 
 
 def task_family(task: str) -> str:
@@ -37,36 +37,24 @@ def loss_label(task: str) -> str:
 # ---------------------------------------------------------------------- constitutive motion
 
 
-def simulate_best(run: Run, best: Candidate) -> tuple[np.ndarray, np.ndarray]:
-    """Ground-truth and simulated positions, (steps + 1, N, 3) each, of the best law (float32)."""
-    import torch
+def best_motion(run: Run, best: Candidate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Steps, observed and fitted positions (frames, N, 3) of the best law.
 
-    import taichi_mpm as tm
-    from bridges import laws
-    from bridges.rollout import Rollout
-    from bridges.step import torch_dtype
-    from tasks.constitutive.evaluation import ensure_runtime, ground_truth, known_elastic_law
-    from tasks.constitutive.law_code import load_law
+    The fitted positions are the trajectory the trusted fit recorded at the best epoch (its
+    ``trajectory`` artifact); the report never loads the candidate's code. The observation is
+    the task's ground truth, read from its cache.
+    """
+    from tasks.constitutive.artifacts import decode_positions
+    from tasks.constitutive.evaluation import ensure_runtime, ground_truth
     from tasks.constitutive.specs import SPECS
 
-    spec = SPECS[run.task]
+    artifact = best.artifacts().get("trajectory")
+    if artifact is None:
+        raise ValueError(f"{best.id} has no recorded trajectory (a run from an older version?)")
+    steps, fitted = decode_positions(artifact)
     ensure_runtime("float32")
-    dtype = torch_dtype()
-    law = load_law(best.code, dtype)
-    with torch.no_grad():
-        for name, parameter in law.named_parameters():
-            flat = parameter.view(-1)
-            for index in range(flat.numel()):
-                key = name if flat.numel() == 1 else f"{name}[{index}]"
-                if key in best.parameters:
-                    flat[index] = best.parameters[key]
-    observed = ground_truth(spec, run.config.get("task_options", {}).get("steps"))
-    scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
-    if spec.searched == "elastic":
-        rollout = Rollout(scene, laws.NoPlasticity(), law)
-    else:
-        rollout = Rollout(scene, law, known_elastic_law(dtype))
-    return observed.positions, rollout.simulate()
+    observed = ground_truth(SPECS[run.task], run.config.get("task_options", {}).get("steps"))
+    return steps, observed.positions[steps], fitted
 
 
 def _limits(positions: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -88,17 +76,19 @@ def _panel(axes, points: np.ndarray, limits, title: str, colour: str) -> None:
 
 
 def plot_motion(run: Run, best: Candidate, folder: Path) -> tuple[Path, Path]:
-    """Ground truth above, the best law below, at a few steps (PNG); the same as a GIF."""
+    """Ground truth above, the best law below, at a few steps (PNG); every recorded frame as a
+    GIF (the fitted motion is the best epoch's, as the fit recorded it: teacher-forced)."""
     from matplotlib.animation import PillowWriter
 
-    truth, simulated = simulate_best(run, best)
+    steps, truth, simulated = best_motion(run, best)
     limits = _limits(truth)
-    steps = np.linspace(0, truth.shape[0] - 1, MOTION_FRAMES).astype(int)
+    frames = np.linspace(0, len(steps) - 1, MOTION_FRAMES).round().astype(int)
     figure = new_figure(2.8 * MOTION_FRAMES, 6.0)
     grid = figure.subplots(2, MOTION_FRAMES)
-    for column, step in enumerate(steps):
-        _panel(grid[0, column], truth[step], limits, f"ground truth, step {step}", "#264653")
-        _panel(grid[1, column], simulated[step], limits, f"{best.id}, step {step}", "#e76f51")
+    for column, frame in enumerate(frames):
+        step = steps[frame]
+        _panel(grid[0, column], truth[frame], limits, f"ground truth, step {step}", "#264653")
+        _panel(grid[1, column], simulated[frame], limits, f"{best.id}, step {step}", "#e76f51")
     figure.suptitle(f"{run.task}: observed motion vs the best law (x-y projection)")
     png = save(figure, folder / "motion.png")
 
@@ -107,9 +97,9 @@ def plot_motion(run: Run, best: Candidate, folder: Path) -> tuple[Path, Path]:
     writer = PillowWriter(fps=GIF_FPS)
     gif = folder / "motion.gif"
     with writer.saving(animation, str(gif), dpi=100):
-        for step in np.linspace(0, truth.shape[0] - 1, GIF_FRAMES).astype(int):
-            _panel(left, truth[step], limits, f"ground truth, step {step}", "#264653")
-            _panel(right, simulated[step], limits, f"{best.id}, step {step}", "#e76f51")
+        for frame, step in enumerate(steps):
+            _panel(left, truth[frame], limits, f"ground truth, step {step}", "#264653")
+            _panel(right, simulated[frame], limits, f"{best.id}, step {step}", "#e76f51")
             animation.tight_layout()
             writer.grab_frame()
     return png, gif

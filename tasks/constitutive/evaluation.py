@@ -104,8 +104,11 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         feedback=text,
         parameters=result.best_parameters,
         curves={"loss": result.losses, **result.parameters},
-        extras={"best_epoch": result.best_epoch, "stopped": result.stopped,
-                "epoch_seconds": result.seconds},  # fmt: skip
+        extras={
+            "best_epoch": result.best_epoch,
+            "stopped": result.stopped,
+            "epoch_seconds": result.seconds,
+        },  # fmt: skip
         seconds=time.perf_counter() - started,
         artifacts={"trajectory": encode_positions(result.positions)},
     )

@@ -9,6 +9,7 @@ or precision regenerates it, and a missing or unreadable file is simply regenera
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 from dataclasses import dataclass
@@ -65,14 +66,22 @@ def generate(material: tm.Material, scene: tm.Scene, reset_every: int) -> Trajec
 def load_or_generate(
     name: str, material: tm.Material, scene: tm.Scene, reset_every: int
 ) -> Trajectory:
-    """The cached trajectory of task ``name``, generated (and cached) when missing."""
+    """The cached trajectory of task ``name``, generated (and cached) when missing.
+
+    The file is used only if its content hash matches the one recorded beside it when it was
+    generated (``<file>.sha256``); a missing, damaged or altered file is generated again.
+    """
     path = cache_dir() / "ground_truth" / f"{name}-{cache_key(material, scene, reset_every)}.npz"
+    digest_path = path.with_name(path.name + ".sha256")
     try:
-        with np.load(path) as data:
+        content = path.read_bytes()
+        if hashlib.sha256(content).hexdigest() != digest_path.read_text().strip():
+            raise ValueError("content hash differs from the one recorded at generation")
+        with np.load(io.BytesIO(content)) as data:
             states = {key: data[f"state_{key}"] for key in "xvCF"}
             return Trajectory(data["positions"], data["reset_steps"], states)
     except (OSError, KeyError, ValueError):
-        pass  # missing or damaged: regenerate
+        pass  # missing, damaged or altered: regenerate
     trajectory = generate(material, scene, reset_every)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(f".{os.getpid()}.tmp.npz")
@@ -82,5 +91,9 @@ def load_or_generate(
         reset_steps=trajectory.reset_steps,
         **{f"state_{key}": value for key, value in trajectory.states.items()},
     )
+    digest = hashlib.sha256(partial.read_bytes()).hexdigest()
+    partial_digest = digest_path.with_suffix(f".{os.getpid()}.tmp")
+    partial_digest.write_text(digest + "\n")
     partial.replace(path)  # atomic: concurrent workers never read half a file
+    partial_digest.replace(digest_path)
     return trajectory

@@ -4,9 +4,10 @@ This is the only place where a law's code runs, and it must run only in the sand
 process (:mod:`sga_agent.capture_server`). ``Physics()`` is built, then ``forward`` is traced
 with ``make_fx`` on symbolic fake tensors: every ATen operation it performs on F (batch size
 symbolic, so the graph holds for any number of particles) and on its parameters becomes a node
-of a :mod:`~tasks.constitutive.law_graph` document (this module imports neither it nor Taichi). Python control flow is executed during the
-trace, so loops unroll and branches on Python values are taken once; a branch on a tensor's
-value cannot be traced and is refused with a hint (use ``torch.where``).
+of a :mod:`~tasks.constitutive.law_graph` document (this module imports neither it nor
+Taichi). Python control flow is executed during the trace, so loops unroll and branches on
+Python values are taken once; a branch on a tensor's value cannot be traced and is refused with
+a hint (use ``torch.where``).
 
 Nothing here is trusted by whoever reads the result: the fit checks the document again.
 """
@@ -85,7 +86,7 @@ def capture_law(code: str) -> dict[str, Any]:
     names = [name for name, _ in named]
 
     def forward(F: torch.Tensor, *values: torch.Tensor) -> torch.Tensor:
-        return torch.func.functional_call(law, dict(zip(names, values)), (F,))
+        return torch.func.functional_call(law, dict(zip(names, values, strict=True)), (F,))
 
     F = _sample_deformation_gradients()
     try:

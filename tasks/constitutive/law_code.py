@@ -1,9 +1,9 @@
 """Turning a law's source code into a ``Physics`` module, with one-line reasons when it fails.
 
 Runs the code (it is untrusted: call this only in the confined capture process, see
-:mod:`tasks.constitutive.law_capture`) in a fresh module namespace, then checks what the prompt asks for: a class ``Physics`` deriving from
-``torch.nn.Module``, an ``__init__`` whose arguments all have defaults, and
-``forward(self, F)``.
+:mod:`tasks.constitutive.law_capture`) in a fresh module namespace, then checks what the prompt
+asks for: a class ``Physics`` deriving from ``torch.nn.Module``, an ``__init__`` whose arguments
+all have defaults, and ``forward(self, F)``.
 """
 
 from __future__ import annotations

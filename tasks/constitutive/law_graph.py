@@ -336,7 +336,7 @@ def _tensor_data(item: Any, floats_only: bool) -> TensorData:
         raise LawGraphError("a tensor of the graph is malformed")
     shape, values = item.get("shape"), item.get("values")
     dtype = item.get("dtype", "float64")
-    if not (isinstance(shape, list) and all(type(n) is int and 0 <= n for n in shape)):
+    if not (isinstance(shape, list) and all(type(n) is int and n >= 0 for n in shape)):
         raise LawGraphError("a tensor of the graph has a malformed shape")
     if not isinstance(values, list) or len(values) != math.prod(shape):
         raise LawGraphError("a tensor of the graph does not hold as many values as its shape")

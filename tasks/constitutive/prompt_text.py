@@ -90,6 +90,9 @@ Code rules:
 6. `torch.linalg.svd(F)` may be used: in the simulator it returns rotations U and Vh
    (det = +1, so the last singular value is negative for an inverted F) and its gradient stays
    finite when singular values coincide. Guard logarithms and divisions (`clamp(min=...)`).
+7. The law is recorded as a graph of tensor operations before it is fitted: no Python `if` on a
+   tensor's value, no `.item()`, `float()` or NumPy on tensors (use
+   `torch.where(condition, a, b)` instead of an if), no random numbers, no in-place writes.
 """
 
 ELASTIC_RULES = _COMMON_RULES + (

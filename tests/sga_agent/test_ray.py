@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from sga_agent import registry, runner, worker
+from sga_agent import registry, runner
 from sga_agent.cli import main
 from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.proposers.base import Proposal
@@ -62,14 +62,20 @@ class LiteralTask:
     def prompt_parts(self) -> PromptParts:
         return PromptParts(role="tester", context="", template="", requirements="")
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def capture(self, solution: str) -> dict:
         namespace: dict = {}
         exec(solution, namespace)  # literal assignments only: the static check ran
-        action, loss = namespace["SMILES"], float(namespace["coordinates"][0][0])
+        return {"action": namespace["SMILES"], "loss": float(namespace["coordinates"][0][0])}
+
+    def evaluate(self, data: dict, settings: EvaluationSettings) -> Evaluation:
+        action, loss = data["action"], data["loss"]
         if action == "raise":
             raise ValueError("the double was asked to raise")
         if action == "invalid":
             return Evaluation.invalid("the double rejects this candidate")
+        if action.startswith(("wait:", "hang:")):  # tell the test which process fits it
+            folder = Path(action[5:]).parent if action.startswith("wait:") else Path(action[5:])
+            (folder / f"evaluating-{os.getpid()}").write_text(action)
         if action.startswith("wait:"):
             deadline = time.monotonic() + 60
             while not os.path.exists(action[5:]) and time.monotonic() < deadline:
@@ -103,17 +109,18 @@ def config(**overrides) -> SearchConfig:
 @pytest.fixture
 def double_task(monkeypatch):
     """The search loads ``module:callable`` tasks; the workers (and Ray's) import this file."""
-    monkeypatch.setattr(registry, "load_task", worker.load)
+    monkeypatch.setattr(registry, "load_task", registry.resolve_task)
     path = [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(path))
 
 
 def outcomes(store: RunStore) -> dict[str, dict]:
-    """Every candidate's recorded evaluation, without its wall time."""
+    """Every candidate's recorded evaluation, without its wall times."""
     recorded = {}
     for folder in sorted((store.path / "candidates").iterdir()):
         evaluation = json.loads((folder / "evaluation.json").read_text())
         del evaluation["seconds"]
+        evaluation["extras"].pop("capture_seconds", None)
         recorded[folder.name] = evaluation
     return recorded
 
@@ -157,20 +164,18 @@ def test_a_search_through_ray_matches_the_local_pool(tmp_path, double_task):
     assert ray_event["cpus"] == 2 and ray_event["nodes"] == 1  # sized by --workers 2
 
 
-def sandbox_workers() -> list[tuple[int, int, str]]:
-    """(pid, parent pid, solution) of every running sandbox worker whose parent is a Ray worker."""
+def sandbox_workers(folder: Path) -> list[tuple[int, int, str]]:
+    """(pid, parent pid, action) of every running fit worker whose parent is a Ray worker and
+    which told ``folder`` that it is fitting a waiting or hanging candidate."""
     found = []
-    for proc in Path("/proc").glob("[0-9]*"):
+    for marker in folder.glob("evaluating-*"):
+        proc = Path("/proc") / marker.name.removeprefix("evaluating-")
         try:
-            args = (proc / "cmdline").read_bytes().decode().split("\0")
-            if "sga_agent.worker" not in args:
-                continue
-            request = Path(args[args.index("sga_agent.worker") + 1])
-            solution = json.loads(request.read_text())["solution"]
+            solution = marker.read_text()
             parent = int((proc / "stat").read_text().rpartition(")")[2].split()[1])
             parent_title = Path(f"/proc/{parent}/cmdline").read_bytes().decode()
-        except (OSError, ValueError, IndexError, KeyError):
-            continue  # it finished meanwhile, or is no sandbox worker
+        except (OSError, ValueError, IndexError):
+            continue  # it finished meanwhile
         if parent_title.startswith("ray::"):
             found.append((int(proc.name), parent, solution))
     return found
@@ -183,7 +188,7 @@ def kill_ray_workers(search: Future, waiting: str, hanging: str, release: Path) 
     seen: set[int] = set()
     deadline = time.monotonic() + 90
     while not search.done() and time.monotonic() < deadline:
-        for pid, ray_worker, solution in sandbox_workers():
+        for pid, ray_worker, solution in sandbox_workers(release.parent):
             if pid in seen:
                 continue
             seen.add(pid)
@@ -277,7 +282,7 @@ def lose_the_node(tmp: str) -> None:
 
     from sga_agent.ray_executor import RayClusterLostError
 
-    registry.load_task = worker.load
+    registry.load_task = registry.resolve_task
     tmp_path = Path(tmp)
     release = tmp_path / "release"
     waiting = f"wait:{release}"
@@ -293,7 +298,7 @@ def lose_the_node(tmp: str) -> None:
             deadline = time.monotonic() + 60
             both_running = False  # the two candidates of iteration 1 are being evaluated
             while time.monotonic() < deadline and not search.done() and not both_running:
-                both_running = sum(waiting in s for *_, s in sandbox_workers()) == 2
+                both_running = sum(waiting in s for *_, s in sandbox_workers(tmp_path)) == 2
                 time.sleep(0.05)
             os.kill(raylet, signal.SIGKILL)
             if both_running:

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import struct
-from pathlib import Path
 
+import numpy as np
 from click.testing import CliRunner
 
 from sga_agent.cli import main
@@ -91,11 +92,25 @@ def test_molecule_report_draws_the_top_three(tmp_path):
     assert png_size(folder / "molecules.png") == (3 * 450, 400)  # three 450x400 drawings
 
 
-def test_motion_picture_of_the_best_law(tmp_path, monkeypatch):
-    monkeypatch.setattr(pictures, "GIF_FRAMES", 3)  # the GIF's frames cost most of the time
-    law = Path(__file__).resolve().parents[2] / "examples" / "laws" / "neo_hookean.py"
-    best = Candidate("01-exploit-00", "ok", 1e-3, code=law.read_text())
+def test_motion_picture_is_drawn_from_the_fit_artifact_never_from_code(tmp_path):
+    from tasks.constitutive.artifacts import encode_positions
+    from tasks.constitutive.evaluation import ensure_runtime, ground_truth
+    from tasks.constitutive.specs import SPECS
+
+    ensure_runtime("float32")
+    observed = ground_truth(SPECS["elastic"], 12).positions
+    folder = tmp_path / "01-exploit-00"
+    folder.mkdir()
+    shifted = observed + np.array([0.05, 0.0, 0.0])
+    artifact = {"trajectory": encode_positions(shifted, frames=4)}
+    (folder / "artifacts.json").write_text(json.dumps(artifact))
+    code = "raise SystemExit('a report must never run candidate code')\n"
+    best = Candidate("01-exploit-00", "ok", 1e-3, code=code, folder=folder)
     run = Run(tmp_path, {"task": "elastic", "task_options": {"steps": 12}}, [best])
+    steps, truth, fitted = pictures.best_motion(run, best)
+    assert steps.tolist() == [0, 4, 8, 12]
+    assert np.abs(fitted - shifted[steps]).max() < 1e-5  # 16-bit quantisation over the box
+    assert np.array_equal(truth, observed[steps])
     png, gif = pictures.plot_motion(run, best, tmp_path)
     assert png_size(png) == (round(2.8 * pictures.MOTION_FRAMES * DPI), 6 * DPI)
     assert gif.read_bytes()[:6] == b"GIF89a"

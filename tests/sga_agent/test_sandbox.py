@@ -1,7 +1,11 @@
-"""The sandbox: results come back, and every way a candidate can fail becomes a typed outcome."""
+"""The sandbox: results come back, and every way a candidate can fail becomes a typed outcome.
+
+The candidates here run in the capture step of :class:`tests.sga_agent.doubles.ExecTask` (which
+executes them); its fit believes what they report, so these tests see the capture process from
+inside. Real tasks check the captured data in the fit (see tests/hostile for forgery attempts).
+"""
 
 import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -10,7 +14,7 @@ import pytest
 from sga_agent import sandbox
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.sandbox import (
-    LOG_TAIL_CHARS,
+    EvaluationSlot,
     SandboxLimits,
     SandboxPool,
     evaluate_in_sandbox,
@@ -22,6 +26,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 DOUBLE = "tests.sga_agent.doubles:ExecTask"
 SETTINGS = EvaluationSettings()
 LIMITS = SandboxLimits(timeout_s=60)
+ISOLATED = not detect_isolation().processes.startswith("none:")
 
 INFINITE_LOOP = "while True:\n    pass\n"
 MEMORY_BOMB = "chunks = []\nwhile True:\n    chunks.append(bytearray(64 * 2**20))\n"
@@ -44,15 +49,6 @@ def writer(path: Path) -> str:
     )
 
 
-def is_running(pid: int) -> bool:
-    """Whether ``pid`` exists and is not a zombie waiting to be reaped."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
-
-
 def test_good_solution_is_evaluated_despite_its_prints():
     solution = "print('{\"valid\": false}')\nloss = 0.25\nparameters = {'E': 3.0}\n"
     settings = EvaluationSettings(epochs=3, learning_rate=0.1, seed=7, options={"a": [1, 2]})
@@ -67,52 +63,66 @@ def test_good_solution_is_evaluated_despite_its_prints():
         "seed": 7,
         "options": {"a": [1, 2]},
     }
-    assert 0 < evaluation.seconds < 30
+    assert 0 < evaluation.extras["capture_seconds"] <= evaluation.seconds < 60
+    assert evaluation.artifacts["captured"]["loss"] == 0.25  # what the fit was given
 
 
 def test_infinite_loop_is_killed_at_the_time_limit():
     start = time.monotonic()
-    evaluation = sandboxed(INFINITE_LOOP, SandboxLimits(timeout_s=1.5))
+    limits = SandboxLimits(timeout_s=60, capture_timeout_s=1.5)
+    evaluation = sandboxed(INFINITE_LOOP, limits)
     assert (evaluation.valid, evaluation.status) == (False, "timeout")
     assert evaluation.reason == "exceeded the time limit of 1.5 s"
     assert evaluation.loss == float("inf")
-    assert time.monotonic() - start < 10
-    assert 1.5 <= evaluation.seconds < 10
+    assert time.monotonic() - start < 30
 
 
 def test_memory_bomb_is_stopped_by_the_limit():
     evaluation = sandboxed(MEMORY_BOMB, SandboxLimits(timeout_s=60, memory_mb=256))
     assert (evaluation.valid, evaluation.status) == (False, "out_of_memory")
-    assert evaluation.reason.startswith("exceeded the memory limit of 256 MB"), evaluation.reason
+    assert evaluation.reason.startswith("exceeded the capture's memory limit of 256 MB")
     assert "MemoryError" in evaluation.reason
+
+
+def test_shared_memory_counts_against_the_limit():
+    shared = (
+        "import ctypes\n"
+        "libc = ctypes.CDLL(None, use_errno=True)\n"
+        "libc.mmap.restype = ctypes.c_void_p\n"
+        "libc.mmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t] + [ctypes.c_int] * 3 + "
+        "[ctypes.c_long]\n"
+        "address = libc.mmap(None, 6 * 2**30, 3, 0x01 | 0x20, -1, 0)  # shared, anonymous\n"
+        "report = [address in (None, 2**64 - 1), ctypes.get_errno()]\n"
+    )
+    evaluation = sandboxed(shared, SandboxLimits(timeout_s=60, memory_mb=512))
+    assert evaluation.valid, evaluation.reason
+    assert evaluation.extras["report"] == [True, 12]  # MAP_FAILED, ENOMEM: RLIMIT_AS holds
 
 
 def test_segfault_is_reported_as_a_crash():
     evaluation = sandboxed(SEGFAULT)
     assert (evaluation.valid, evaluation.status) == (False, "crashed")
-    assert evaluation.reason.startswith("killed by SIGSEGV"), evaluation.reason
-    assert "Fatal Python error" in evaluation.extras["log"]  # faulthandler's traceback
+    assert evaluation.reason.startswith("the capture process was killed by SIGSEGV")
 
 
-def test_exception_in_evaluate_gives_reason_and_the_end_of_the_traceback():
+def test_exception_in_capture_gives_reason_and_the_end_of_the_traceback():
     solution = "def law(n):\n    return law(n + 1) if n < 400 else 1 / 0\nlaw(0)\n"
     evaluation = sandboxed(solution)
     assert (evaluation.valid, evaluation.status) == (False, "error")
-    assert evaluation.reason == "evaluation raised ZeroDivisionError: division by zero"
+    assert evaluation.reason == "capturing the solution raised ZeroDivisionError: division by zero"
     trace = evaluation.extras["traceback"]
-    assert len(trace) <= 4000 and "in law" in trace
+    assert len(trace) <= 4000
     assert trace.rstrip().endswith("ZeroDivisionError: division by zero")
 
 
 def test_exit_calls_are_contained():
     evaluation = sandboxed("import sys\nsys.exit(3)\n")
-    assert (evaluation.reason, evaluation.status) == ("evaluation raised SystemExit: 3", "error")
-    evaluation = sandboxed("import os\nos._exit(0)\n")
-    assert evaluation.reason == "the sandbox worker exited without writing a result"
-    assert evaluation.status == "crashed"
-    evaluation = sandboxed("import os\nos._exit(4)\n")
-    assert evaluation.reason == "the sandbox worker exited with status 4"
-    assert evaluation.status == "crashed"
+    assert evaluation.reason == "capturing the solution raised SystemExit: 3"
+    assert evaluation.status == "error"
+    for code in (0, 4):
+        evaluation = sandboxed(f"import os\nos._exit({code})\n")
+        assert evaluation.reason == f"the capture process exited (status {code}) without a result"
+        assert evaluation.status == "crashed"
 
 
 def test_non_finite_loss_is_unstable():
@@ -129,11 +139,9 @@ def test_environment_is_scrubbed(monkeypatch):
     monkeypatch.setenv("SGA_CACHE_DIR", str(Path.home() / ".cache" / "sga"))
     evaluation = sandboxed("", SandboxLimits(timeout_s=60, threads=2))
     environ = evaluation.extras["environ"]
-    assert not {"FAKE_API_KEY", "TI_FAKE_TOKEN", "SGA_UNRELATED"} & set(environ)
-    assert environ["HOME"] == os.environ["HOME"]
-    assert environ["SGA_CACHE_DIR"] == os.environ["SGA_CACHE_DIR"]
-    assert environ["OMP_NUM_THREADS"] == environ["TI_CPU_MAX_NUM_THREADS"] == "2"
-    assert environ["TMPDIR"] == evaluation.extras["cwd"]
+    assert not {"FAKE_API_KEY", "TI_FAKE_TOKEN", "SGA_UNRELATED", "SGA_CACHE_DIR"} & set(environ)
+    assert environ["HOME"] != os.environ["HOME"]  # the capture is not told where caches are
+    assert environ["OMP_NUM_THREADS"] == environ["TI_CPU_MAX_NUM_THREADS"] == "1"
     assert environ["PYTHONPATH"].split(os.pathsep)[0] == str(REPO_ROOT)
 
 
@@ -151,54 +159,82 @@ def test_secret_names(name, secret):
     assert looks_secret(name) is secret
 
 
-def test_stdin_is_closed():
-    solution = "import os, sys\nreport = [sys.stdin.read(), os.read(0, 10).decode()]\n"
+def test_stdin_is_closed_and_prints_go_nowhere():
+    solution = (
+        "import os, sys\nreport = [sys.stdin.read(), os.read(0, 10).decode()]\n"
+        "for i in range(3000):\n    print('line', i, 'x' * 2000)\nloss = 0.5\n"
+    )
     evaluation = sandboxed(solution)
     assert evaluation.valid, evaluation.reason
-    assert evaluation.extras["report"] == ["", ""]
+    assert evaluation.extras["report"] == ["", ""] and evaluation.loss == 0.5
 
 
-def test_printing_is_capped_and_cannot_fail_the_evaluation():
-    chatty = "for i in range(3000):\n    print('line', i, 'x' * 2000)\n"
-    limits = SandboxLimits(timeout_s=60, file_size_mb=1)  # prints 6 MB
-    evaluation = sandboxed(chatty + "loss = 0.5\n", limits)
-    assert (evaluation.valid, evaluation.loss) == (True, 0.5), evaluation.reason
-    evaluation = sandboxed(chatty + "import os\nos._exit(5)\n", limits)
-    assert evaluation.status == "crashed"
-    log = evaluation.extras["log"]
-    assert log.startswith("[") and "earlier bytes dropped]" in log.splitlines()[0]
-    assert log.rstrip().endswith("line 2999 " + "x" * 2000)
-    assert len(log.encode()) < LOG_TAIL_CHARS + 100
-
-
-def test_working_directory_is_a_removed_temporary_directory():
-    evaluation = sandboxed("open('scratch.txt', 'w').write('x')\n")
-    cwd = Path(evaluation.extras["cwd"])
-    assert cwd != Path.cwd()
-    assert cwd.is_relative_to(Path(tempfile.gettempdir()).resolve())
-    assert not cwd.exists()
-
-
-def test_file_size_limit_is_contained():
-    big = "with open('big.bin', 'wb') as f:\n    f.write(b'0' * (3 * 2**20))\n"
-    evaluation = sandboxed(big, SandboxLimits(timeout_s=60, file_size_mb=1))
-    assert (evaluation.valid, evaluation.status) == (False, "error")
-    assert evaluation.reason == "evaluation raised OSError: [Errno 27] File too large"
-
-
-def test_processes_left_behind_are_killed():
-    spawner = (
-        "import subprocess, sys\n"
-        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n"
-        "parameters = {'pid': child.pid}\n"
+@pytest.mark.skipif(not ISOLATED, reason=f"no isolation here: {detect_isolation().processes}")
+def test_nothing_can_be_written_not_even_the_working_directory(tmp_path):
+    evaluation = sandboxed(writer(Path("scratch.txt")))
+    assert (
+        evaluation.status == "error"
+        and "OSError" in evaluation.reason
+        or ("PermissionError" in evaluation.reason)
     )
-    evaluation = sandboxed(spawner)
+    evaluation = sandboxed(writer(tmp_path / "outside.txt"))
+    assert evaluation.status == "error"
+    assert not (tmp_path / "outside.txt").exists()
+
+
+def nobody_processes() -> set[int]:
+    pids = set()
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                status = (entry / "status").read_text()
+            except OSError:
+                continue
+            uid_line = next(line for line in status.splitlines() if line.startswith("Uid:"))
+            if uid_line.split()[1] == "65534":
+                pids.add(int(entry.name))
+    return pids
+
+
+@pytest.mark.skipif(os.getuid() != 0 or not ISOLATED, reason="needs root and namespaces")
+def test_every_process_the_candidate_starts_dies_with_the_capture():
+    before = nobody_processes()
+    daemon = (
+        "import os, time\n"
+        "if os.fork() == 0:\n"
+        "    os.setsid()\n"
+        "    if os.fork() == 0:\n"
+        "        time.sleep(120)\n"
+        "    os._exit(0)\n"
+        "report = os.getuid()\n"
+    )
+    evaluation = sandboxed(daemon)
     assert evaluation.valid, evaluation.reason
-    pid = int(evaluation.parameters["pid"])
+    assert evaluation.extras["report"] == 65534  # it ran as nobody
     deadline = time.monotonic() + 5
-    while is_running(pid) and time.monotonic() < deadline:
+    while nobody_processes() - before and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not is_running(pid)
+    assert not nobody_processes() - before
+
+
+@pytest.mark.skipif(os.getuid() != 0 or not ISOLATED, reason="needs root and namespaces")
+def test_a_fork_storm_hits_the_process_limit():
+    storm = (
+        "import os, time\npids = []\n"
+        "try:\n"
+        "    for _ in range(2000):\n"
+        "        pid = os.fork()\n"
+        "        if pid == 0:\n"
+        "            time.sleep(30)\n"
+        "            os._exit(0)\n"
+        "        pids.append(pid)\n"
+        "except OSError as error:\n"
+        "    report = [len(pids), error.errno]\n"
+    )
+    evaluation = sandboxed(storm)
+    assert evaluation.valid, evaluation.reason
+    forked, errno = evaluation.extras["report"]
+    assert forked < 300 and errno == 11  # EAGAIN: RLIMIT_NPROC
 
 
 @pytest.mark.parametrize(
@@ -219,13 +255,20 @@ def test_task_that_cannot_be_loaded_is_an_error(task, reason):
 def test_pool_survives_every_failure_and_keeps_input_order(tmp_path):
     outside = tmp_path / "outside.txt"
     solutions = [INFINITE_LOOP, MEMORY_BOMB, SEGFAULT, writer(outside), "loss = 0.5\n"]
-    limits = SandboxLimits(timeout_s=4, memory_mb=256)
-    with SandboxPool(3, limits, extra_python_path=[REPO_ROOT]) as pool:
+    limits = SandboxLimits(timeout_s=30, capture_timeout_s=4, memory_mb=256)
+    with SandboxPool(2, limits, extra_python_path=[REPO_ROOT]) as pool:
         evaluations = pool.map(DOUBLE, solutions, SETTINGS)
     statuses = [evaluation.status for evaluation in evaluations]
-    assert statuses == ["timeout", "out_of_memory", "crashed", "error", "ok"]
+    assert statuses == ["timeout", "out_of_memory", "crashed", "error" if ISOLATED else "ok", "ok"]
     assert evaluations[-1].loss == 0.5
-    assert not outside.exists()
+    assert outside.exists() is not ISOLATED
+
+
+def test_pool_keeps_its_helpers_warm():
+    with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        first, second = pool.map(DOUBLE, ["loss = 1.0\n", "loss = 2.0\n"], SETTINGS)
+    assert (first.loss, second.loss) == (1.0, 2.0)
+    assert second.extras["capture_seconds"] < first.extras["capture_seconds"]
 
 
 def test_pool_defaults_to_one_worker_per_core():
@@ -237,7 +280,7 @@ def test_pool_never_raises_for_a_failing_sandbox(monkeypatch):
     def broken(*args):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(sandbox, "_run_worker", broken)
+    monkeypatch.setattr(EvaluationSlot, "evaluate", broken)
     with SandboxPool(1, LIMITS) as pool:
         [evaluation] = pool.map(DOUBLE, [""], SETTINGS)
     assert evaluation.status == "error"
@@ -251,12 +294,12 @@ def test_pool_records_its_isolation():
         assert pool.isolation() == Isolation.none("disabled (SandboxLimits.isolation=False)")
 
 
-def test_worker_not_isolated_as_detected_refuses_to_evaluate(monkeypatch):
+def test_capture_not_isolated_as_detected_refuses_to_evaluate(monkeypatch):
     promised = Isolation("a firewall", "read-only disk", "a jail")
     monkeypatch.setattr(sandbox, "detect_isolation", lambda: promised)
     evaluation = sandboxed("loss = 0.0\n")
     assert (evaluation.valid, evaluation.status) == (False, "error")
-    assert evaluation.reason.startswith("not evaluated: the worker could not be isolated")
+    assert evaluation.reason.startswith("not evaluated: the capture process could not be isolated")
     assert "network: " in evaluation.reason
 
 
@@ -280,6 +323,7 @@ def test_unserialisable_settings_are_a_caller_error():
         ({"timeout_s": 0}, ValueError, "timeout_s must be a positive"),
         ({"timeout_s": float("inf")}, ValueError, "timeout_s"),
         ({"timeout_s": "10"}, TypeError, "timeout_s must be a number"),
+        ({"capture_timeout_s": -1}, ValueError, "capture_timeout_s must be a positive"),
         ({"memory_mb": 10}, ValueError, "memory_mb must be at least 64"),
         ({"file_size_mb": 1.5}, TypeError, "file_size_mb must be an integer"),
         ({"threads": 0}, ValueError, "threads must be at least 1"),

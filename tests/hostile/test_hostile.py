@@ -1,0 +1,186 @@
+"""The hostile corpus through the real sandbox: no forged score, no damage, no leak, no leftover.
+
+Every candidate of ``candidates/`` is evaluated as a search evaluates it (a warm
+:class:`~sga_agent.sandbox.SandboxPool`: confined capture, trusted fit), with the static checks
+bypassed so that the sandbox alone is tested; a few go through ``sga-agent evaluate`` too. Then:
+
+- a candidate expected to be refused is not ``ok``;
+- an ``ok`` one reports the loss a fresh trusted fit worker gives for the graph it was fitted
+  on (``artifacts["captured"]``), to 1e-6 relative;
+- the task caches (ground truth, Taichi's kernels) are byte-identical before and after;
+- no output holds the secret marker (as text, as hex, or as byte values);
+- no process of the capture user is left.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from sga_agent.cli import main
+from sga_agent.sandbox import SandboxLimits, SandboxPool, _LineProcess, worker_environment
+from sga_agent.task import EvaluationSettings
+from tests.hostile.catalog import load_catalog
+from tests.sga_agent.test_sandbox import ISOLATED, nobody_processes
+
+pytestmark = pytest.mark.skipif(not ISOLATED, reason="the capture cannot be isolated here")
+
+CATALOG = load_catalog()
+SETTINGS = EvaluationSettings(epochs=1, options={"steps": 20})
+LIMITS = SandboxLimits(timeout_s=300, capture_timeout_s=30, memory_mb=2048)
+MARKER = "SGA-HOSTILE-MARKER-7f3a"
+SECRET = Path("/root/.sga-hostile-secret")
+
+
+def cache_digests() -> dict[str, str]:
+    """Content hash of every file in the task caches."""
+    home = Path.home() / ".cache"
+    roots = [Path(os.environ.get("SGA_CACHE_DIR") or home / "sga"), home / "taichi"]
+    digests = {}
+    for root in roots:
+        for path in sorted(root.rglob("*")) if root.exists() else []:
+            if path.is_file():
+                digests[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return digests
+
+
+@pytest.fixture(scope="module")
+def evaluated():
+    """Every candidate's evaluation, the caches before and after, processes left."""
+    if os.getuid() == 0:
+        SECRET.write_text(f"{MARKER}\n")
+        SECRET.chmod(0o600)
+    laws = Path(__file__).parents[2] / "examples" / "laws"
+    with SandboxPool(1, LIMITS) as pool:  # ground truth and kernels built before any candidate
+        for task, law in (("granular", "fluid.py"), ("elastic", "neo_hookean.py")):
+            [warm] = pool.map(task, [(laws / law).read_text()], SETTINGS)
+            assert warm.valid, warm.reason
+    before, processes = cache_digests(), nobody_processes()
+    results = {}
+    with SandboxPool(2, LIMITS) as pool:
+        futures = {c.name: pool.submit(c.task, c.code, SETTINGS) for c in CATALOG}
+        results = {name: future.result() for name, future in futures.items()}
+    deadline = time.monotonic() + 10
+    while nobody_processes() - processes and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = nobody_processes() - processes
+    yield results, before, cache_digests(), left
+    SECRET.unlink(missing_ok=True)
+
+
+class Refitter:
+    """Fresh trusted fit workers, one per task, kept warm for the whole module."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder, self.workers = folder, {}
+
+    def __call__(self, task: str, data: dict) -> float:
+        """The loss a trusted fit worker (not the one that scored it) gives for ``data``."""
+        if task not in self.workers:
+            command = [sys.executable, "-m", "sga_agent.fit_worker", task, "4096"]
+            worker = _LineProcess(command, worker_environment(LIMITS), self.folder, task)
+            worker.ask(None, 600)
+            self.workers[task] = worker
+        settings = json.loads(json.dumps(vars(SETTINGS)))
+        return float(self.workers[task].ask({"data": data, "settings": settings}, 600)["loss"])
+
+    def close(self) -> None:
+        for worker in self.workers.values():
+            worker.close()
+
+
+@pytest.fixture(scope="module")
+def refit(tmp_path_factory):
+    refitter = Refitter(tmp_path_factory.mktemp("refit"))
+    yield refitter
+    refitter.close()
+
+
+def leaks(evaluation_json: str) -> bool:
+    hexed = MARKER.encode().hex()
+    codes = ", ".join(str(1000 + byte) for byte in MARKER.encode()[:6])
+    return MARKER in evaluation_json or hexed in evaluation_json or codes in evaluation_json
+
+
+@pytest.mark.parametrize("candidate", CATALOG, ids=[c.name for c in CATALOG])
+def test_candidate_cannot_forge_or_leak(candidate, evaluated, refit):
+    results, *_ = evaluated
+    evaluation = results[candidate.name]
+    if candidate.expected == "refused":
+        assert evaluation.status != "ok", (evaluation.loss, evaluation.feedback[:300])
+    if evaluation.status == "ok":
+        honest = refit(candidate.task, evaluation.artifacts["captured"])
+        assert math.isclose(evaluation.loss, honest, rel_tol=1e-6), (evaluation.loss, honest)
+    assert not leaks(json.dumps(evaluation.to_dict()))
+
+
+def test_caches_are_untouched_and_no_process_is_left(evaluated):
+    _, before, after, left = evaluated
+    assert after == before
+    assert not left
+
+
+@pytest.mark.parametrize("name", ["01", "24", "61"])
+def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
+    [candidate] = [c for c in CATALOG if c.name.startswith(f"{name}_")]
+    path = tmp_path / "law.py"
+    path.write_text(candidate.code)
+    result = CliRunner().invoke(
+        main, ["evaluate", "--task", candidate.task, str(path), "--epochs", "1",
+               "--option", "steps=20", "--json"],
+    )  # fmt: skip
+    evaluation = json.loads(result.output.strip().splitlines()[-1])
+    if candidate.static == "rejected":
+        assert evaluation["reason"].startswith("the code breaks the rules")
+    elif evaluation["status"] == "ok":
+        honest = refit(candidate.task, evaluation["artifacts"]["captured"])
+        assert math.isclose(float(evaluation["loss"]), honest, rel_tol=1e-6)
+    assert not leaks(result.output)
+
+
+def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit):
+    """Every granular candidate that passes the static checks, proposed in a real search."""
+    from sga_agent import registry
+    from sga_agent.config import SearchConfig
+    from sga_agent.run_store import RunStore
+    from sga_agent.search import Search
+    from tests.sga_agent.test_search import Scripted
+
+    hostile = [c for c in CATALOG if c.task == "granular" and c.static == "passes"]
+    truth = (Path(__file__).parents[2] / "examples" / "laws" / "drucker_prager.py").read_text()
+    answers = [f"### Code\n```python\n{code}```\n" for code in [truth] + [c.code for c in hostile]]
+    explore = 6
+    cfg = SearchConfig(
+        task="granular", proposer="scripted", iterations=-(-len(answers) // (explore + 1)),
+        top_k=3, exploit=1, explore=explore, workers=2, epochs=1,
+        task_options={"steps": 20}, timeout_s=300.0, memory_mb=2048,
+    )  # fmt: skip
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    before = cache_digests()
+    limits = SandboxLimits(timeout_s=300.0, capture_timeout_s=30, memory_mb=2048)
+    with SandboxPool(2, limits) as pool:
+        result = Search(cfg, registry.load_task("granular"), Scripted(answers), pool, store).run()
+    assert cache_digests() == before
+    scored = 0
+    for folder in sorted((store.path / "candidates").iterdir()):
+        evaluation = json.loads((folder / "evaluation.json").read_text())
+        if evaluation["status"] != "ok" or "duplicate_of" in evaluation["extras"]:
+            continue
+        artifacts = json.loads((folder / "artifacts.json").read_text())
+        honest = refit("granular", artifacts["captured"])
+        assert math.isclose(float(evaluation["loss"]), honest, rel_tol=1e-6), folder.name
+        scored += 1
+    assert scored >= 5
+    best = result.top[0]
+    assert best.loss < 1e-10, (best.candidate, best.loss)  # the true law tops an honest heap
+    for path in store.path.rglob("*"):
+        if path.is_file():
+            assert not leaks(path.read_text(errors="replace")), path
