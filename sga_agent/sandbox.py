@@ -368,7 +368,8 @@ class EvaluationSlot:
             )
         if not worker.alive or evaluation.status == "out_of_memory":
             self._fit = None  # it exits after a failed allocation
-        evaluation.artifacts["captured"] = data  # what was fitted, for an honest re-evaluation
+        if evaluation.valid:  # checked by the fit: what was scored, for an honest re-evaluation
+            evaluation.artifacts["captured"] = data
         return evaluation
 
     def _fit_worker(self, task: str, key: str) -> _LineProcess:
@@ -404,7 +405,8 @@ def _capture_outcome(
         outcome = json.loads(reply.get("output", ""))
         if not isinstance(outcome, dict) or len(outcome) not in (1, 2):
             raise ValueError("not an outcome")
-    except ValueError:
+        json.dumps(outcome)  # it must travel on to the fit worker
+    except (ValueError, RecursionError):
         return Evaluation.invalid(
             "the capture process sent back no readable outcome", status="crashed"
         )

@@ -15,6 +15,7 @@ from tasks.constitutive.inner import InnerResult, InnerSettings
 CURVE_POINTS = 10  # values listed per curve
 TRAJECTORY_FRAMES = 10
 CORNERS = 4  # particles listed
+PARAMETERS_LISTED = 16  # scalar parameter values listed; a larger law gets a count
 
 
 def corner_particles(positions: np.ndarray, count: int = CORNERS) -> list[int]:
@@ -55,8 +56,11 @@ def optimization_text(result: InnerResult, settings: InnerSettings) -> str:
             "Parameters by epoch (the value at the best epoch is kept):",
         ]
         best = result.best_parameters
-        for name, values in result.parameters.items():
+        for name, values in list(result.parameters.items())[:PARAMETERS_LISTED]:
             lines.append(f"- {name}: {_curve(values)}; best {best[name]:.6g}")
+        hidden = len(result.parameters) - PARAMETERS_LISTED
+        if hidden > 0:
+            lines.append(f"- ... and {hidden} more parameter values (not listed)")
     if result.rejected_trials:
         lines.append(
             f"{len(result.rejected_trials)} trial points of the line search were rejected (not "

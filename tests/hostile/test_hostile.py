@@ -35,7 +35,7 @@ pytestmark = pytest.mark.skipif(not ISOLATED, reason="the capture cannot be isol
 
 CATALOG = load_catalog()
 SETTINGS = EvaluationSettings(epochs=1, options={"steps": 20})
-LIMITS = SandboxLimits(timeout_s=300, capture_timeout_s=30, memory_mb=2048)
+LIMITS = SandboxLimits(timeout_s=300, capture_timeout_s=10, memory_mb=2048)
 MARKER = "SGA-HOSTILE-MARKER-7f3a"
 SECRET = Path("/root/.sga-hostile-secret")
 
@@ -137,7 +137,8 @@ def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
         main, ["evaluate", "--task", candidate.task, str(path), "--epochs", "1",
                "--option", "steps=20", "--json"],
     )  # fmt: skip
-    evaluation = json.loads(result.output.strip().splitlines()[-1])
+    [line] = [line for line in result.output.splitlines() if line.startswith("{")]
+    evaluation = json.loads(line)
     if candidate.static == "rejected":
         assert evaluation["reason"].startswith("the code breaks the rules")
     elif evaluation["status"] == "ok":
@@ -147,14 +148,14 @@ def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
 
 
 def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit):
-    """Every granular candidate that passes the static checks, proposed in a real search."""
+    """A third of the granular candidates that pass the static checks, in a real search."""
     from sga_agent import registry
     from sga_agent.config import SearchConfig
     from sga_agent.run_store import RunStore
     from sga_agent.search import Search
     from tests.sga_agent.test_search import Scripted
 
-    hostile = [c for c in CATALOG if c.task == "granular" and c.static == "passes"]
+    hostile = [c for c in CATALOG if c.task == "granular" and c.static == "passes"][::3]
     truth = (Path(__file__).parents[2] / "examples" / "laws" / "drucker_prager.py").read_text()
     answers = [f"### Code\n```python\n{code}```\n" for code in [truth] + [c.code for c in hostile]]
     explore = 6
@@ -165,7 +166,7 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
     )  # fmt: skip
     store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
     before = cache_digests()
-    limits = SandboxLimits(timeout_s=300.0, capture_timeout_s=30, memory_mb=2048)
+    limits = SandboxLimits(timeout_s=300.0, capture_timeout_s=10, memory_mb=2048)
     with SandboxPool(2, limits) as pool:
         result = Search(cfg, registry.load_task("granular"), Scripted(answers), pool, store).run()
     assert cache_digests() == before
@@ -178,9 +179,12 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
         honest = refit("granular", artifacts["captured"])
         assert math.isclose(float(evaluation["loss"]), honest, rel_tol=1e-6), folder.name
         scored += 1
-    assert scored >= 5
+    assert scored >= 3
     best = result.top[0]
     assert best.loss < 1e-10, (best.candidate, best.loss)  # the true law tops an honest heap
-    for path in store.path.rglob("*"):
-        if path.is_file():
+    for name in ("evaluation.json", "feedback.txt", "curves.json", "artifacts.json"):
+        for path in (store.path / "candidates").glob(f"*/{name}"):  # what the evaluations wrote
             assert not leaks(path.read_text(errors="replace")), path
+    for event in store.events():
+        if event["type"] == "evaluation":
+            assert not leaks(json.dumps(event)), event["candidate"]
