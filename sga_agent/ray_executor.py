@@ -10,10 +10,10 @@ project installed at the same version (and the path of ``extra_python_path``, if
 Failures
 --------
 A task whose Ray worker process or node dies is retried once (:data:`TASK_RETRIES`, Ray's
-``max_retries``; the sandbox worker dies with its Ray worker, so nothing is left running). If
-the retry is lost too, or Ray cannot run the task at all, its future holds an invalid
-:class:`~sga_agent.task.Evaluation` whose reason names Ray and its error: status "crashed" for
-a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed the worker,
+``max_retries``; the capture server and fit worker die with their Ray worker, so nothing is
+left running). If the retry is lost too, or Ray cannot run the task at all, its future holds an
+invalid :class:`~sga_agent.task.Evaluation` whose reason names Ray and its error: status
+"crashed" for a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed the worker,
 "error" otherwise; the search records it as any other outcome. One failure is not an outcome
 of the candidate: when the Ray node of the search's own machine stops (the cluster was shut
 down, or its head node died), every later task would fail too, so the futures raise
@@ -70,7 +70,7 @@ def import_ray() -> ModuleType:
 
 
 class RayPool:
-    """Evaluate candidates as Ray tasks, each in a sandbox worker on a node of the cluster.
+    """Evaluate candidates as Ray tasks, each captured and fitted on a node of the cluster.
 
     Same interface as :class:`~sga_agent.sandbox.SandboxPool`. If this process is already
     connected to Ray (``ray.init`` was called), that connection is used and left open;
@@ -83,7 +83,7 @@ class RayPool:
         ``RAY_ADDRESS``, else a cluster started on this machine with ``ray start``). None
         starts a private local Ray instance with ``local_cpus`` CPUs, stopped by :meth:`close`.
     limits : SandboxLimits
-        Limits of every evaluation, applied by the sandbox worker on the node.
+        Limits of every evaluation, applied on the node.
     cpus_per_task : float
         CPUs each evaluation reserves on its node (Ray's ``num_cpus``).
     memory_mb : int, optional
