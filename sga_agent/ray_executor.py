@@ -13,8 +13,8 @@ A task whose Ray worker process or node dies is retried once (:data:`TASK_RETRIE
 ``max_retries``; the capture server and fit worker die with their Ray worker, so nothing is
 left running). If the retry is lost too, or Ray cannot run the task at all, its future holds an
 invalid :class:`~sga_agent.task.Evaluation` whose reason names Ray and its error: status
-"crashed" for a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed the worker,
-"error" otherwise; the search records it as any other outcome. One failure is not an outcome
+"crashed" for a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed
+the worker, "error" otherwise; the search records it as any other outcome. One failure is not an outcome
 of the candidate: when the Ray node of the search's own machine stops (the cluster was shut
 down, or its head node died), every later task would fail too, so the futures raise
 :class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded, and
