@@ -9,6 +9,7 @@ Modules, one job each: :mod:`.task` (the task contract), :mod:`.registry` (plugi
 entry points), :mod:`.prompting` and :mod:`.parsing` (prompts in, answers out, static checks),
 :mod:`.proposers` (litellm backbone), :mod:`.sandbox`, :mod:`.capture_server`,
 :mod:`.fit_worker` and :mod:`.isolation` (each candidate captured in a confined process, scored
-by a trusted fit worker), :mod:`.fingerprint` (identical code is evaluated once), :mod:`.heap`, :mod:`.search` (Algorithm 1), :mod:`.config` (settings and
-presets), :mod:`.run_store` (the run folder), :mod:`.runner` and :mod:`.cli` (``sga-agent``).
+by a trusted fit worker), :mod:`.fingerprint` (identical code is evaluated once),
+:mod:`.heap`, :mod:`.search` (Algorithm 1), :mod:`.config` (settings and presets),
+:mod:`.run_store` (the run folder), :mod:`.runner` and :mod:`.cli` (``sga-agent``).
 """
