@@ -15,10 +15,10 @@ left running). If the retry is lost too, or Ray cannot run the task at all, its 
 invalid :class:`~sga_agent.task.Evaluation` whose reason names Ray and its error: status
 "crashed" for a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed
 the worker, "error" otherwise; the search records it as any other outcome. One failure is not
-an outcome of the candidate: when the Ray node of the search's own machine stops (the cluster was shut
-down, or its head node died), every later task would fail too, so the futures raise
-:class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded, and
-``sga-agent resume`` evaluates them once a cluster is back.
+an outcome of the candidate: when the Ray node of the search's own machine stops (the cluster
+was shut down, or its head node died), every later task would fail too, so the futures raise
+:class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded,
+and ``sga-agent resume`` evaluates them once a cluster is back.
 
 The search must run on a node of the cluster (usually the head), as every Ray driver does.
 
