@@ -1,12 +1,14 @@
 """Time of one candidate evaluation of a constitutive-law task (paper scene, float32, CPU).
 
 Each task runs in a fresh process (so its peak memory is its own): the ground-truth law
-started 2x off is fitted for ``--epochs`` epochs (one epoch: the 1000-step teacher-forced
-forward pass and its segment-wise backward, with the torch law in the loop). Printed: the
-whole evaluation, the wall time per epoch, the peak resident memory (and, as "base", the
-memory of the process once torch and Taichi are loaded and started), and the ratio to the
-per-epoch times the issue reports for the original authors' Warp + torch code on this
-machine (elastic 9-14 s, plasticine 17-23 s, about 2 GB). Usage::
+started 2x off is captured (in that process, as it is our own example law; untimed: see
+``benchmarks/sandbox_overhead.py`` for the capture's cost) and fitted for ``--epochs`` epochs
+(one epoch: the 1000-step teacher-forced forward pass and its segment-wise backward, with the
+law rebuilt from its graph in the loop). Printed: the whole evaluation, the wall time per
+epoch, the peak resident memory (and, as "base", the memory of the process once torch and
+Taichi are loaded and started), and the ratio to the per-epoch times the issue reports for the
+original authors' Warp + torch code on this machine (elastic 9-14 s, plasticine 17-23 s, about
+2 GB). Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 30] [--tasks elastic plasticine] [--profile]
 """
@@ -47,19 +49,18 @@ def run_one(task: str, epochs: int, profile: bool) -> dict:
 
     ensure_runtime("float32")
     baseline_mb = _resident_mb()  # torch, Taichi and the project imported, Taichi started
-    evaluator.evaluate(law_code(task), EvaluationSettings(epochs=0))  # compile, ground truth
+    data = evaluator.capture(law_code(task))  # the law's graph: what the fit worker receives
+    evaluator.evaluate(data, EvaluationSettings(epochs=0))  # compile, ground truth
     started = time.perf_counter()
     if profile:
         import cProfile
         import pstats
 
         profiler = cProfile.Profile()
-        result = profiler.runcall(
-            evaluator.evaluate, law_code(task), EvaluationSettings(epochs=epochs)
-        )
+        result = profiler.runcall(evaluator.evaluate, data, EvaluationSettings(epochs=epochs))
         pstats.Stats(profiler, stream=sys.stderr).sort_stats("tottime").print_stats(15)
     else:
-        result = evaluator.evaluate(law_code(task), EvaluationSettings(epochs=epochs))
+        result = evaluator.evaluate(data, EvaluationSettings(epochs=epochs))
     seconds = time.perf_counter() - started
     return {
         "task": task,

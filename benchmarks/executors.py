@@ -1,14 +1,17 @@
 """Throughput of the executors: candidates per minute on the local pool and on Ray, side by side.
 
-Both evaluate the same candidates in the same sandboxed workers, ``--workers`` at a time: the
-local pool (:class:`~sga_agent.sandbox.SandboxPool`) in threads of this process, Ray
-(:class:`~sga_agent.ray_executor.RayPool`) as tasks of a local Ray instance of ``--workers``
-CPUs that the benchmark starts. The candidates are, by default, a cheap task that keeps one CPU
-busy for ``--work`` seconds (the sandbox's start-up comes on top), or ``--task NAME`` (e.g.
-``--task elastic --option steps=50 --epochs 1``): its seed solution, evaluated again and again.
-Each pool first evaluates ``--workers`` candidates untimed (Ray starts its worker processes);
-Ray's start-up is reported separately. With ``--repeats``, each pool runs that many times,
-alternately first and second, and the medians are shown. Usage::
+Both evaluate the same candidates in the same sandbox (a confined capture, then a trusted fit),
+``--workers`` at a time: the local pool (:class:`~sga_agent.sandbox.SandboxPool`) in threads of
+this process, its capture servers and fit workers kept warm from one candidate to the next;
+Ray (:class:`~sga_agent.ray_executor.RayPool`) as tasks of a local Ray instance of
+``--workers`` CPUs that the benchmark starts, each task starting its own capture server and
+fit worker. The candidates are, by default, a cheap task whose fit keeps one CPU busy for
+``--work`` seconds (the sandbox's start-up and the capture come on top), or ``--task NAME``
+(e.g. ``--task elastic --option steps=50 --epochs 1``): its seed solution, evaluated again and
+again. Each pool first evaluates ``--workers`` candidates untimed (Ray starts its worker
+processes; the local pool starts its helpers); Ray's start-up is reported separately. With
+``--repeats``, each pool runs that many times, alternately first and second, and the medians
+are shown. Usage::
 
     python benchmarks/executors.py [--candidates 40] [--workers 2] [--work 0.5] [--repeats 3]
     python benchmarks/executors.py --task elastic --option steps=50 --epochs 1 --candidates 8
@@ -23,19 +26,24 @@ import time
 from collections.abc import Callable
 from concurrent.futures import wait
 from pathlib import Path
+from typing import Any
 
 from sga_agent import registry
 from sga_agent.cli.options import key_value_options
 from sga_agent.ray_executor import RayPool
 from sga_agent.sandbox import SandboxLimits, SandboxPool
-from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, PromptParts
 
 HERE = Path(__file__).resolve().parent
 BUSY_TASK = "executors:BusyTask"
 
 
 class BusyTask:
-    """The solution is a number of seconds to keep one CPU busy (a benchmark task)."""
+    """The solution is a number of seconds to keep one CPU busy (a benchmark task).
+
+    The CPU is kept busy in ``evaluate``, the trusted fit, where a real task spends its time
+    (a constitutive law's simulation and inner optimization); ``capture`` only reads the number.
+    """
 
     name = "busy"
     description = "Keeps a CPU busy for as many seconds as the solution says."
@@ -47,8 +55,17 @@ class BusyTask:
     def prompt_parts(self) -> PromptParts:
         return PromptParts(role="", context="", template="", requirements="")
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
-        deadline = time.process_time() + float(solution.split()[0])
+    def capture(self, solution: str) -> dict[str, Any]:
+        try:
+            return {"seconds": float(solution.split()[0])}
+        except (IndexError, ValueError):
+            raise InvalidSolution("the solution must start with a number of seconds") from None
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        seconds = data.get("seconds") if isinstance(data, dict) else None
+        if not isinstance(seconds, (int, float)) or not 0 <= seconds <= 3600:
+            return Evaluation.invalid("the captured work is not a number of seconds in [0, 3600]")
+        deadline = time.process_time() + seconds
         spins = 0
         while time.process_time() < deadline:
             spins += 1

@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     eval_times, failures = [], []
     for name in names:
         smiles = DRUG_LIKE[name]
-        evaluation = task.evaluate(conformer_solution(smiles), settings)
+        evaluation = task.evaluate(task.capture(conformer_solution(smiles)), settings)
         heavy, atoms, step = gradient_step_seconds(smiles)
         eval_times.append(evaluation.seconds)
         if not evaluation.valid:

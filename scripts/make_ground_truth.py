@@ -5,7 +5,8 @@ written in torch (``examples/laws``): the seed must score clearly worse than the
 scores at float32 noise level. With ``--fit`` it then starts the ground-truth law with its
 parameters 2x off and runs the task's inner optimization (the paper's Adam, learning rate 3e-2,
 30 epochs; L-BFGS with 31 evaluations for `imaginary`), reporting the loss before and after.
-Usage::
+Each law goes through the task's two steps, capture (its graph) then evaluate (the fit), both
+in this process: the laws are this project's own, so they need no sandbox. Usage::
 
     python scripts/make_ground_truth.py [--tasks elastic plasticine ...] [--steps 1000] [--fit]
 """
@@ -21,7 +22,7 @@ from pathlib import Path
 import torch
 
 from sga_agent.registry import load_task
-from sga_agent.task import EvaluationSettings
+from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, Task
 from tasks.constitutive.specs import SPECS
 
 LAWS = Path(__file__).resolve().parent.parent / "examples" / "laws"
@@ -61,6 +62,15 @@ def truth_code(task: str, start: dict[str, float] | None = None) -> str:
     return code
 
 
+def score(task: Task, code: str, settings: EvaluationSettings, label: str) -> Evaluation:
+    """Capture ``code`` (one of our own laws, so in this process) and fit the captured law."""
+    try:
+        data = task.capture(code)
+    except InvalidSolution as error:
+        raise SystemExit(f"{task.name}: the {label} law could not be captured: {error}") from None
+    return task.evaluate(data, settings)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tasks", nargs="+", default=list(SPECS), choices=list(SPECS))
@@ -74,8 +84,8 @@ def main() -> None:
     for name in args.tasks:
         task = load_task(name)
         started = time.perf_counter()
-        seed = task.evaluate(task.seed_solution(), settings)
-        truth = task.evaluate(truth_code(name), settings)
+        seed = score(task, task.seed_solution(), settings, "seed")
+        truth = score(task, truth_code(name), settings, "truth")
         for label, result in (("seed", seed), ("truth", truth)):
             if not result.valid:
                 raise SystemExit(f"{name}: the {label} law is invalid: {result.reason}")
@@ -87,9 +97,8 @@ def main() -> None:
               f"{'seconds':>8}  fitted parameters")  # fmt: skip
         for name in args.tasks:
             started = time.perf_counter()
-            fit = load_task(name).evaluate(
-                truth_code(name, TWICE_OFF[name]), EvaluationSettings(options=options)
-            )
+            code = truth_code(name, TWICE_OFF[name])
+            fit = score(load_task(name), code, EvaluationSettings(options=options), "2x-off truth")
             if not fit.valid:
                 raise SystemExit(f"{name}: the fit failed: {fit.reason}")
             first = fit.curves["loss"][0]

@@ -1,18 +1,21 @@
 """Cheap tasks for the benchmark-grid tests: a law's loss is its distance to a target number.
 
-The code of a solution is a ``Physics`` law returning ``F * value``; the task reads ``value``
-from the text (nothing is run, nothing heavy is imported), so a sandboxed evaluation takes a
-fraction of a second. The built-in proposer scales the best parent's value by random factors
-drawn from the seed, so different seeds give different (reproducible) results.
+The code of a solution is a ``Physics`` law returning ``F * value``; the task's capture reads
+``value`` from the text (nothing is run, nothing heavy is imported) and its evaluation scores
+that number, so a sandboxed evaluation takes a fraction of a second. The built-in proposer
+scales the best parent's value by random factors drawn from the seed, so different seeds give
+different (reproducible) results.
 """
 
 from __future__ import annotations
 
+import math
 import random
 import re
 from collections.abc import Sequence
+from typing import Any
 
-from sga_agent.task import Evaluation, EvaluationSettings, Parent, PromptParts
+from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, Parent, PromptParts
 
 LAW = """import torch
 import torch.nn as nn
@@ -26,7 +29,10 @@ VALUE = re.compile(r"return F \* ([-\d.e+]+)")
 
 
 def value_of(code: str) -> float:
-    return float(VALUE.search(code).group(1))
+    found = VALUE.search(code)
+    if found is None:
+        raise InvalidSolution("the law does not return F * <number>")
+    return float(found.group(1))
 
 
 class Nudge:
@@ -60,8 +66,14 @@ class NumberTask:
     def builtin_proposer(self) -> Nudge:
         return Nudge()
 
-    def evaluate(self, solution: str, settings: EvaluationSettings) -> Evaluation:
-        loss = abs(value_of(solution) - self.target)
+    def capture(self, solution: str) -> dict[str, Any]:
+        return {"value": value_of(solution)}
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        value = data.get("value") if isinstance(data, dict) else None
+        if not isinstance(value, float) or not math.isfinite(value):
+            return Evaluation.invalid("the captured value is not a finite number")
+        loss = abs(value - self.target)
         return Evaluation(True, loss, f"off by {loss}", parameters={})
 
 

@@ -1,4 +1,5 @@
-"""`sga-agent evaluate` on broken law files: a one-line reason and a non-zero exit, no crash."""
+"""`sga-agent evaluate` on broken law files: a one-line reason and a non-zero exit, no crash,
+whether the static checks, the confined capture or the trusted fit refuse the law."""
 
 import json
 import subprocess
@@ -8,8 +9,17 @@ from pathlib import Path
 import pytest
 
 BROKEN = {
-    "syntax": ("class Physics(nn.Module:\n", "does not compile: SyntaxError"),
-    "missing class": ("import torch\n\nclass Law:\n    pass\n", "no class named 'Physics'"),
+    # refused by the static checks, before the sandbox
+    "syntax": ("class Physics(nn.Module:\n", "the code is not valid Python"),
+    "missing class": ("import torch\n\nclass Law:\n    pass\n", "no top-level class 'Physics'"),
+    # refused by the capture
+    "branch on a tensor": (
+        "import torch.nn as nn\n\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        if F.sum() > 0:\n            return F\n"
+        "        return -F\n",
+        "use torch.where(condition, a, b) instead of an if",
+    ),
+    # refused by the fit
     "wrong shape": (
         "import torch.nn as nn\n\nclass Physics(nn.Module):\n"
         "    def forward(self, F):\n        return F.sum(-1)\n",

@@ -358,7 +358,7 @@ def test_gp_laws_are_scored_by_the_simulation():
     answers = task.builtin_proposer().propose_from(seeded, 1.0, 2, seed=0)
     codes = [law_code(Genome("plastic")), *(parse_response(a).code for a in answers)]
     settings = EvaluationSettings(epochs=1, options={"steps": 100})
-    results = [task.evaluate(code, settings) for code in codes]
+    results = [task.evaluate(task.capture(code), settings) for code in codes]
     assert results[0].valid and math.isfinite(results[0].loss)
     for result in results:
         assert result.status in ("ok", "unstable"), result.reason

@@ -1,6 +1,6 @@
 """A small LLM-free search on the elastic task improves on the seed law (the built-in
-proposers are a real search). Evaluated in-process (the test session runs Taichi in float64);
-the sandbox has its own tests."""
+proposers are a real search). Captured and fitted in-process (the test session runs Taichi in
+float64; the laws are the GP's own code); the sandbox has its own tests."""
 
 from concurrent.futures import Future
 
@@ -9,17 +9,26 @@ from sga_agent.registry import load_task
 from sga_agent.run_store import RunStore
 from sga_agent.runner import with_preferred_options
 from sga_agent.search import Search
+from sga_agent.task import Evaluation, InvalidSolution
 
 
 class InProcess:
-    """Evaluator double: the task's own evaluate, here, one at a time."""
+    """Evaluator double: the task's own capture and evaluate, here, one at a time (a refused
+    capture is an invalid Evaluation, as in the sandbox)."""
 
     def __init__(self, task) -> None:
         self.task = task
 
     def submit(self, task, solution, settings):
         future = Future()
-        future.set_result(self.task.evaluate(solution, settings))
+        try:
+            data = self.task.capture(solution)
+        except InvalidSolution as error:
+            future.set_result(Evaluation.invalid(str(error)))
+        else:
+            evaluation = self.task.evaluate(data, settings)
+            evaluation.artifacts["captured"] = data  # as the sandbox's Evaluator records it
+            future.set_result(evaluation)
         return future
 
 

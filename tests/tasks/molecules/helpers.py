@@ -6,6 +6,7 @@ import numpy as np
 from rdkit import Chem
 from rdkit.Chem import AllChem
 
+from sga_agent.task import Evaluation, EvaluationSettings, Task
 from tasks.molecules.solution import format_solution
 
 
@@ -23,3 +24,8 @@ def conformer(smiles: str, seed: int = 7) -> tuple[np.ndarray, np.ndarray, np.nd
 def solution_for(smiles: str, seed: int = 7) -> str:
     """Solution text with a sensible conformer of ``smiles``."""
     return format_solution(smiles, conformer(smiles, seed)[2].tolist())
+
+
+def score(task: Task, solution: str, settings: EvaluationSettings) -> Evaluation:
+    """``solution`` captured and scored in this process, the two steps the sandbox runs apart."""
+    return task.evaluate(task.capture(solution), settings)

@@ -15,7 +15,7 @@ from sga_agent.task import EvaluationSettings
 from tasks.molecules import HomoTask
 from tasks.molecules.calibration import CALIBRATION, QM9_STATISTICS
 from tasks.molecules.examples import DRUG_LIKE
-from tests.tasks.molecules.helpers import solution_for
+from tests.tasks.molecules.helpers import score, solution_for
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -54,7 +54,7 @@ def test_twenty_drug_like_molecules_evaluate() -> None:
     assert len(DRUG_LIKE) == 20
     task = HomoTask()
     for name, smiles in DRUG_LIKE.items():
-        evaluation = task.evaluate(solution_for(smiles), EvaluationSettings(epochs=2))
+        evaluation = score(task, solution_for(smiles), EvaluationSettings(epochs=2))
         assert evaluation.valid, (name, evaluation.reason)
         assert evaluation.extras["geometry_source"] == "proposal", name
 

@@ -11,7 +11,7 @@ from tasks.molecules.geometry import build_structure
 from tasks.molecules.inner_loop import Objective, run_inner_loop
 from tasks.molecules.solution import Proposal
 from tasks.molecules.validation import check_proposal
-from tests.tasks.molecules.helpers import conformer, solution_for
+from tests.tasks.molecules.helpers import conformer, score, solution_for
 
 SMILES = "OCc1ccncc1F"  # 9 heavy atoms, 16 atoms in all: quick
 
@@ -47,7 +47,7 @@ def test_heavier_strain_weight_allows_less_strain(structure) -> None:
 
 def test_evaluation_reports_losses_curves_and_coordinates() -> None:
     settings = EvaluationSettings(epochs=4, learning_rate=0.02)
-    evaluation = GapLowTask().evaluate(solution_for(SMILES), settings)
+    evaluation = score(GapLowTask(), solution_for(SMILES), settings)
     assert evaluation.valid, evaluation.reason
     curves = evaluation.curves
     assert {"loss", "property", "strain"} <= set(curves)
@@ -68,7 +68,7 @@ def test_evaluation_reports_losses_curves_and_coordinates() -> None:
 
 
 def test_zero_epochs_scores_the_start(structure) -> None:
-    evaluation = HomoTask().evaluate(solution_for(SMILES), EvaluationSettings(epochs=0))
+    evaluation = score(HomoTask(), solution_for(SMILES), EvaluationSettings(epochs=0))
     assert evaluation.valid
     assert len(evaluation.curves["loss"]) == 1
     assert evaluation.parameters["strain_kcal_mol"] == 0.0

@@ -11,6 +11,7 @@ from sga_agent.task import EvaluationSettings, PromptParts, Task
 from tasks.molecules import GapLowTask, GapTask, HomoTask, LumoTask
 from tasks.molecules.solution import parse_solution
 from tasks.molecules.validation import check_proposal
+from tests.tasks.molecules.helpers import score
 
 TASKS = {"homo": (HomoTask, "homo", 0.0), "lumo": (LumoTask, "lumo", 0.0)}
 TASKS |= {"gap": (GapTask, "gap", 0.0), "gap-low": (GapLowTask, "gap", -2.0)}
@@ -39,10 +40,21 @@ def test_seed_solution_is_a_valid_molecule() -> None:
 
 
 def test_seed_solution_evaluates() -> None:
-    evaluation = GapTask().evaluate(GapTask().seed_solution(), EvaluationSettings(epochs=2))
+    evaluation = score(GapTask(), GapTask().seed_solution(), EvaluationSettings(epochs=2))
     assert evaluation.valid, evaluation.reason
     assert evaluation.extras["geometry_source"] == "proposal"
     assert evaluation.loss < 10
+
+
+def test_capture_passes_the_text_on_and_the_fit_checks_it() -> None:
+    """The capture runs nothing (the text is data); the fit refuses data that is not text."""
+    seed = HomoTask().seed_solution()
+    assert HomoTask().capture(seed) == {"solution": seed}
+    assert HomoTask().capture("import os; os._exit(1)") == {"solution": "import os; os._exit(1)"}
+    for data in (None, {}, {"solution": 3}, {"law": seed}):
+        evaluation = HomoTask().evaluate(data, EvaluationSettings(epochs=0))
+        assert not evaluation.valid and evaluation.status == "error"
+        assert evaluation.reason == "the captured solution is not text"
 
 
 def test_importing_the_package_is_light() -> None:

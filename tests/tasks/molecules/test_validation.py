@@ -11,7 +11,7 @@ from tasks.molecules import HomoTask
 from tasks.molecules.geometry import build_structure
 from tasks.molecules.solution import Proposal, format_solution
 from tasks.molecules.validation import check_proposal
-from tests.tasks.molecules.helpers import conformer, solution_for
+from tests.tasks.molecules.helpers import conformer, score, solution_for
 
 SMILES = "CC(=O)Nc1ccc(O)cc1"  # 11 heavy atoms
 
@@ -42,7 +42,7 @@ INVALID = [
 
 @pytest.mark.parametrize(("solution", "phrase"), INVALID)
 def test_invalid_proposal_reason(solution: str, phrase: str) -> None:
-    evaluation = HomoTask().evaluate(solution, EvaluationSettings(epochs=1))
+    evaluation = score(HomoTask(), solution, EvaluationSettings(epochs=1))
     assert not evaluation.valid and evaluation.status == "invalid"
     assert math.isinf(evaluation.loss)
     assert "\n" not in evaluation.reason and evaluation.reason
@@ -54,13 +54,13 @@ def test_non_finite_coordinates_are_rejected() -> None:
     rows = [f"[{1.4 * i}, 0.0, 0.0]" for i in range(11)]
     rows[3] = "[1e999, 0.0, 0.0]"  # a literal that overflows to inf
     text = f'SMILES = "{SMILES}"\ncoordinates = [{", ".join(rows)}]\n'
-    evaluation = HomoTask().evaluate(text, EvaluationSettings())
+    evaluation = score(HomoTask(), text, EvaluationSettings())
     assert not evaluation.valid and "row 3 is not finite" in evaluation.reason
 
 
 @pytest.mark.parametrize("garbage", ["", "```python\n```", "\x00\x01", "SMILES = 'C' * 9"])
 def test_garbage_never_raises(garbage: str) -> None:
-    evaluation = HomoTask().evaluate(garbage, EvaluationSettings(epochs=0))
+    evaluation = score(HomoTask(), garbage, EvaluationSettings(epochs=0))
     assert not evaluation.valid and evaluation.reason
 
 
@@ -86,7 +86,7 @@ def test_unusable_coordinates_fall_back_to_etkdg(smiles, source, scale, phrase) 
     assert structure.source == "ETKDG"
     assert phrase in structure.note and "ETKDG" in structure.note
     solution = format_solution(smiles, heavy.tolist())
-    evaluation = HomoTask().evaluate(solution, EvaluationSettings(epochs=0))
+    evaluation = score(HomoTask(), solution, EvaluationSettings(epochs=0))
     assert evaluation.valid
     assert evaluation.extras["geometry_source"] == "ETKDG"
     assert "not usable" in evaluation.feedback
@@ -111,6 +111,6 @@ def test_xtb_failure_is_reported_as_unstable(monkeypatch) -> None:
 
     original = xtb.calculator_options
     monkeypatch.setattr(xtb, "calculator_options", lambda **kw: original(**{**kw, "maxiter": 1}))
-    evaluation = HomoTask().evaluate(solution_for(SMILES), EvaluationSettings(epochs=1))
+    evaluation = score(HomoTask(), solution_for(SMILES), EvaluationSettings(epochs=1))
     assert not evaluation.valid and evaluation.status == "unstable"
     assert "GFN1-xTB could not be run" in evaluation.reason and "converge" in evaluation.reason
