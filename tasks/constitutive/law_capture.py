@@ -24,11 +24,13 @@ from torch.fx.experimental.proxy_tensor import make_fx
 from tasks.constitutive import law_ops
 from tasks.constitutive.law_code import LawCodeError, describe_error, load_law
 
-#: Particles in the traced batch (any size > 1 gives the same symbolic graph).
-TRACE_BATCH = 5
+#: Particles in the traced batch (any size > 1 gives the same symbolic graph), and in the
+#: batch the recorded graph is checked on besides.
+TRACE_BATCH, CHECK_BATCH = 5, 7
 #: Operators of the Python ``operator`` module, by function, for the graph's names.
 _OPERATORS = {function: name for name, function in law_ops.PYTHON_OPS.items()}
 _DATA_DEPENDENT = (
+    "unallocated storage",
     "data-dependent",
     "Data dependent",
     "DataDependent",
@@ -100,7 +102,35 @@ def capture_law(code: str) -> dict[str, Any]:
         raise
     except Exception as error:
         raise LawCaptureError(_explain(error)) from None
-    return serialize(traced, named)
+    document = serialize(traced, named)  # refuses operations that are not allowed first
+    _check_faithful(traced, law, F, [value for _, value in named])
+    return document
+
+
+def _check_faithful(
+    traced: fx.GraphModule, law: torch.nn.Module, F: torch.Tensor, values: list[torch.Tensor]
+) -> None:
+    """Refuse a graph that computes something else than the law, on the traced batch and on
+    one of another size (a value read out of a tensor through NumPy during the trace becomes a
+    wrong constant, silently; a size fixed at the trace breaks on another batch)."""
+    for batch in (F, _sample_deformation_gradients(CHECK_BATCH)):
+        try:
+            with torch.no_grad():
+                expected, actual = law(batch), traced(batch, *values)
+            faithful = isinstance(expected, torch.Tensor) and torch.allclose(
+                actual, expected, rtol=1e-6, atol=1e-9, equal_nan=True
+            )
+        except Exception as error:
+            raise LawCaptureError(
+                f"the recorded law fails on {len(batch)} particles ({describe_error(error)}): "
+                "write it for any number of particles B (reshape with -1, not a fixed size)"
+            ) from None
+        if not faithful:
+            raise LawCaptureError(
+                "the recorded law computes something else than the code: it reads values out "
+                "of tensors (NumPy, float(), .item() or .tolist()) or depends on the number of "
+                "particles; use torch operations on tensors only"
+            )
 
 
 def serialize(traced: fx.GraphModule, parameters: list[tuple[str, torch.Tensor]]) -> dict:
@@ -140,6 +170,8 @@ def serialize(traced: fx.GraphModule, parameters: list[tuple[str, torch.Tensor]]
             constants.append(_tensor_document(tensor))
         elif node.op == "call_function":
             op = _op_name(node.target)
+            if op == "aten._local_scalar_dense.default":  # .item(), float(), int() of a tensor
+                raise LawCaptureError(_explain(RuntimeError("data-dependent")))
             if not law_ops.is_allowed(op):
                 raise LawCaptureError(f"the law calls {op}, which is not allowed: {law_ops.HINT}")
             refs[node] = {"node": len(nodes)}
@@ -182,9 +214,9 @@ def _tensor_document(tensor: torch.Tensor) -> dict[str, Any]:
     }
 
 
-def _sample_deformation_gradients() -> torch.Tensor:
-    generator = torch.Generator().manual_seed(0)
-    noise = torch.randn(TRACE_BATCH, 3, 3, dtype=torch.float64, generator=generator)
+def _sample_deformation_gradients(batch: int = TRACE_BATCH) -> torch.Tensor:
+    generator = torch.Generator().manual_seed(batch)
+    noise = torch.randn(batch, 3, 3, dtype=torch.float64, generator=generator)
     return torch.eye(3, dtype=torch.float64) + 0.05 * noise
 
 

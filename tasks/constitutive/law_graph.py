@@ -20,7 +20,8 @@ A value in ``args``, ``kwargs`` and ``output`` is a JSON number, boolean, null o
 ``{"node": i}`` (the result of an earlier node), ``{"float": "inf"|"-inf"|"nan"}``,
 ``{"dtype": name}``, ``{"device": "cpu"}``, ``{"layout": "strided"}``,
 ``{"memory_format": name}`` or ``{"str": text}`` (an einsum equation or a mode: at most 64
-letters, digits and ``,.->_`` or spaces). No other text travels through a graph except parameter
+letters, digits and ``,.->_`` or spaces; in practice a mode, such as ``rounding_mode``). No
+other text travels through a graph except parameter
 names, and those are short identifiers.
 """
 
@@ -116,8 +117,17 @@ class LawGraph:
 
 
 def build_law(data: Any, dtype: torch.dtype) -> GraphLaw:
-    """The module computing the captured law ``data``, its floats in ``dtype``."""
-    return GraphLaw(LawGraph.from_json(data), dtype)
+    """The module computing the captured law ``data``, its floats in ``dtype``.
+
+    Raises :class:`LawGraphError` for anything wrong with ``data``, whatever fails first.
+    """
+    try:
+        return GraphLaw(LawGraph.from_json(data), dtype)
+    except LawGraphError:
+        raise
+    except (ValueError, TypeError, IndexError, KeyError, AttributeError, RuntimeError,
+            OverflowError, RecursionError) as error:  # fmt: skip
+        raise LawGraphError(f"the graph cannot be built ({type(error).__name__})") from None
 
 
 class GraphLaw(nn.Module):
@@ -136,10 +146,10 @@ class GraphLaw(nn.Module):
         self.graph_constants = holder
         for name, tensor in graph.parameters.items():
             self._add_parameter(name, nn.Parameter(_tensor(tensor, dtype)))
-        object.__setattr__(self, "_code", _compile(self, graph, dtype))
+        object.__setattr__(self, "_graph_module", _compile(self, graph, dtype))
 
     def forward(self, F: torch.Tensor) -> torch.Tensor:
-        return self._code(F)
+        return self._graph_module(F)
 
     def _add_parameter(self, name: str, parameter: nn.Parameter) -> None:
         *path, leaf = name.split(".")
@@ -192,16 +202,29 @@ def _target(op: str) -> Any:
     if op in law_ops.PYTHON_OPS:
         return law_ops.PYTHON_OPS[op]
     _, name, overload_name = op.split(".")
-    if name == "_linalg_svd":
+    if name == "_linalg_svd" and overload_name == "default":
         return stable_svd
-    name = law_ops.ZERO_FILLED.get(name, name)
-    try:
-        overload = getattr(getattr(torch.ops.aten, name), overload_name)
-    except AttributeError:
-        raise LawGraphError("the graph names an operation torch does not have") from None
+    packet = getattr(torch.ops.aten, name, None)
+    overload = getattr(packet, overload_name, None) if packet is not None else None
+    if not isinstance(overload, torch._ops.OpOverload):
+        raise LawGraphError("the graph names an operation torch does not have")
     if overload._schema.is_mutable:
         raise LawGraphError(f"{op} writes into its arguments, which is not allowed")
+    if name in law_ops.ZERO_FILLED:
+        return _ZeroFilled(overload)
     return overload
+
+
+class _ZeroFilled:
+    """An ``empty`` factory made deterministic: its result is filled with zeros."""
+
+    def __init__(self, factory: torch._ops.OpOverload) -> None:
+        self.factory = factory
+        self.__name__ = f"zero_filled_{factory._opname}"
+
+    def __call__(self, *args: Any, **kwargs: Any) -> torch.Tensor:
+        return self.factory(*args, **kwargs).zero_()
+
 
 
 def stable_svd(
@@ -235,9 +258,9 @@ def _tensor(data: TensorData, dtype: torch.dtype) -> torch.Tensor:
 def _known(op: str) -> str:
     """``op`` if it names a real ATen operation, else a description (no text of the graph's)."""
     parts = op.split(".")
-    if len(parts) == 3 and parts[0] == "aten" and len(op) <= 80:
-        packet = getattr(torch.ops.aten, parts[1], None) if parts[1].isidentifier() else None
-        if packet is not None and parts[2] in packet.overloads():
+    if len(parts) == 3 and parts[0] == "aten" and len(op) <= 80 and parts[1].isidentifier():
+        packet = getattr(torch.ops.aten, parts[1], None)
+        if isinstance(packet, torch._ops.OpOverloadPacket) and parts[2] in packet.overloads():
             return op
     return "an operation that is not an ATen operation"
 
@@ -342,9 +365,16 @@ def _tensor_data(item: Any, floats_only: bool) -> TensorData:
         raise LawGraphError("a tensor of the graph does not hold as many values as its shape")
     if dtype not in law_ops.DTYPES or (floats_only and dtype not in law_ops.FLOAT_DTYPES):
         raise LawGraphError("a tensor of the graph has a dtype that is not allowed")
+    if any(n >= _INT64 for n in shape):
+        raise LawGraphError("a tensor of the graph has a malformed shape")
+    integral = dtype not in law_ops.FLOAT_DTYPES
     for value in values:
         if not isinstance(value, (int, float)) or (
             isinstance(value, float) and not math.isfinite(value)
         ):
             raise LawGraphError("a tensor of the graph holds a value that is not a finite number")
+        if integral and (isinstance(value, float) or not -_INT64 <= value < _INT64):
+            raise LawGraphError(f"a {dtype} tensor of the graph holds a value out of its type")
+        if dtype == "bool" and value not in (0, 1):
+            raise LawGraphError("a bool tensor of the graph holds a value other than 0 or 1")
     return TensorData(tuple(shape), tuple(values), dtype)

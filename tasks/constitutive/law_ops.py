@@ -203,6 +203,7 @@ ATEN_OPS = frozenset(
         "sub",
         "sum",
         "sym_numel",
+        "size",
         "sym_size",
         "t",
         "tan",
@@ -223,12 +224,13 @@ ATEN_OPS = frozenset(
         "where",
         "xlogy",
         "zeros",
+        "zero",
         "zeros_like",
     }
 )
 
-#: Factories of uninitialised memory, run as the zero-filled factory of the same signature.
-ZERO_FILLED = {"empty": "zeros", "empty_like": "zeros_like", "new_empty": "new_zeros"}
+#: Factories of uninitialised memory, allowed with their results filled with zeros.
+ZERO_FILLED = frozenset({"empty", "empty_like", "new_empty"})
 ATEN_OPS_WITH_ZEROS = ATEN_OPS | {"new_zeros", "new_ones", "new_full"}
 
 #: Python operators on sizes (symbolic integers of the batch dimension) and tuple items.
