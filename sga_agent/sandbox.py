@@ -268,18 +268,25 @@ class EvaluationSlot:
         self._folder = Path(tempfile.mkdtemp(prefix="sga-sandbox-"))
         self._capture: tuple[str, _LineProcess] | None = None
         self._fit: tuple[str, _LineProcess] | None = None
+        self._fit_ready = False
 
     def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
-        """Capture then fit one solution; every failure is an invalid Evaluation."""
+        """Capture then fit one solution; every failure is an invalid Evaluation.
+
+        A fit worker that is not running yet is started first, so that it loads while the
+        capture runs.
+        """
         start = time.monotonic()
         request = _settings_json(settings)
+        key = f"{task}\n{json.dumps(request['options'], sort_keys=True)}"
+        self._start_fit_worker(task, key)
         captured = self._captured(task, solution)
         capture_seconds = time.monotonic() - start
         if isinstance(captured, Evaluation):
             evaluation = captured
         else:
             remaining = self.limits.timeout_s - capture_seconds
-            evaluation = self._fitted(task, captured, request, remaining)
+            evaluation = self._fitted(captured, request, remaining)
         evaluation.seconds = time.monotonic() - start
         evaluation.extras.setdefault("capture_seconds", round(capture_seconds, 3))
         return evaluation
@@ -339,15 +346,14 @@ class EvaluationSlot:
     # ---------------------------------------------------------------------- fit
 
     def _fitted(
-        self, task: str, data: dict[str, Any], settings: dict[str, Any], remaining: float
+        self, data: dict[str, Any], settings: dict[str, Any], remaining: float
     ) -> Evaluation:
         if remaining <= 0:
             return _failure(
                 f"exceeded the time limit of {self.limits.timeout_s:g} s", "timeout", ""
             )
-        key = f"{task}\n{json.dumps(settings['options'], sort_keys=True)}"
         try:
-            worker = self._fit_worker(task, key)
+            worker = self._ready_fit_worker()
         except HelperFailure as error:
             return Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
         try:
@@ -370,19 +376,28 @@ class EvaluationSlot:
             evaluation.artifacts["captured"] = data
         return evaluation
 
-    def _fit_worker(self, task: str, key: str) -> _LineProcess:
+    def _start_fit_worker(self, task: str, key: str) -> None:
+        """Start a fit worker for ``key`` (task and options) unless one runs; do not wait."""
         if self._fit is not None and self._fit[0] == key and self._fit[1].alive:
-            return self._fit[1]
+            return
         if self._fit is not None:
             self._fit[1].close()
         env = worker_environment(self.limits, self.extra_python_path)
         command = [sys.executable, "-m", "sga_agent.fit_worker", task, str(self.limits.memory_mb)]
-        worker = _LineProcess(command, env, self._folder, "fit")
-        try:  # not ready: a task that cannot load, each answer says why
-            worker.ask(None, START_TIMEOUT_S)
-        except HelperFailure as error:
-            raise HelperFailure(_last_line(worker.log_tail()) or str(error)) from None
-        self._fit = (key, worker)
+        self._fit = (key, _LineProcess(command, env, self._folder, "fit"))
+        self._fit_ready = False
+
+    def _ready_fit_worker(self) -> _LineProcess:
+        """The started fit worker, once it has said it is ready."""
+        assert self._fit is not None
+        worker = self._fit[1]
+        if not self._fit_ready:
+            try:  # not ready: a task that cannot load, each answer says why
+                worker.ask(None, START_TIMEOUT_S)
+            except HelperFailure as error:
+                self._fit = None
+                raise HelperFailure(_last_line(worker.log_tail()) or str(error)) from None
+            self._fit_ready = True
         return worker
 
 
