@@ -58,6 +58,8 @@ def evaluated():
     if os.getuid() == 0:
         SECRET.write_text(f"{MARKER}\n")
         SECRET.chmod(0o600)
+    saved = {name: os.environ.get(name) for name in ("OPENAI_API_KEY", "SGA_HOSTILE_PLAIN")}
+    os.environ.update(dict.fromkeys(saved, MARKER))  # never passed on to a helper
     laws = Path(__file__).parents[2] / "examples" / "laws"
     with SandboxPool(1, LIMITS) as pool:  # ground truth and kernels built before any candidate
         for task, law in (("granular", "fluid.py"), ("elastic", "neo_hookean.py")):
@@ -74,6 +76,11 @@ def evaluated():
     left = nobody_processes() - processes
     yield results, before, cache_digests(), left
     SECRET.unlink(missing_ok=True)
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 class Refitter:
