@@ -57,6 +57,30 @@ class ExecTask:
         )
 
 
+class ExecLawTask(ExecTask):
+    """:class:`ExecTask` for solutions that pass the search's static checks of an equation
+    (a ``Physics`` module, torch imports), as ``sga-agent evaluate`` applies them."""
+
+    capture_modules = ("torch", "torch.nn")
+
+    def seed_solution(self) -> str:
+        return law_solution("loss = 1.0")
+
+
+def law_solution(body: str) -> str:
+    """A solution that passes the static checks and runs ``body`` at module level."""
+    return (
+        "import torch\nimport torch.nn as nn\n\n"
+        f"{body}\n\n\n"
+        "class Physics(nn.Module):\n"
+        "    def __init__(self, scale: float = 1.0):\n"
+        "        super().__init__()\n"
+        "        self.scale = nn.Parameter(torch.tensor(scale))\n\n"
+        "    def forward(self, F: torch.Tensor) -> torch.Tensor:\n"
+        "        return F * self.scale\n"
+    )
+
+
 def not_a_task() -> object:
     """A factory returning something that is not a Task."""
     return object()

@@ -10,9 +10,11 @@ from click.testing import CliRunner
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.evaluate import extract_solution
+from tests.sga_agent.doubles import law_solution
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DOUBLE = "tests.sga_agent.doubles:ExecTask"
+LAW_DOUBLE = "tests.sga_agent.doubles:ExecLawTask"
 
 
 @pytest.fixture
@@ -58,12 +60,11 @@ def test_tasks_with_an_empty_registry(monkeypatch):
 
 
 def test_evaluate_prints_parameters_loss_and_feedback(tmp_path, in_repo):
-    answer = (
-        "First try:\n```python\nloss = 9.0\n```\nBetter:\n"
-        "```python\nloss = 0.25\nparameters = {'youngs_modulus': 2e5}\n"
-        "feedback = 'fits well'\n```\n"
+    better = law_solution(
+        "loss = 0.25\nparameters = {'youngs_modulus': 2e5}\nfeedback = 'fits well'"
     )
-    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, write(tmp_path, answer)])
+    answer = f"First try:\n```python\nloss = 9.0\n```\nBetter:\n```python\n{better}```\n"
+    result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, write(tmp_path, answer)])
     assert result.exit_code == 0, result.output
     assert "fitted parameters" in result.output
     assert "youngs_modulus" in result.output and "200000" in result.output
@@ -72,8 +73,8 @@ def test_evaluate_prints_parameters_loss_and_feedback(tmp_path, in_repo):
 
 
 def test_evaluate_json_passes_settings(tmp_path, in_repo):
-    args = ["evaluate", "--task", DOUBLE, "--epochs", "5", "--lr", "0.01", "--json"]
-    result = CliRunner().invoke(main, [*args, write(tmp_path, "loss = 1.5\n")])
+    args = ["evaluate", "--task", LAW_DOUBLE, "--epochs", "5", "--lr", "0.01", "--json"]
+    result = CliRunner().invoke(main, [*args, write(tmp_path, law_solution("loss = 1.5"))])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["valid"] and data["loss"] == 1.5
@@ -81,13 +82,21 @@ def test_evaluate_json_passes_settings(tmp_path, in_repo):
     assert data["extras"]["settings"]["learning_rate"] == 0.01
 
 
+def test_evaluate_applies_the_searchs_static_checks(tmp_path, in_repo):
+    file = write(tmp_path, "import os\nloss = 0.0\n")
+    result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, file])
+    assert result.exit_code == 1
+    assert result.stderr.startswith("invalid: the code breaks the rules:")
+    assert "os" in result.stderr
+
+
 def test_evaluate_invalid_solution_exits_1_with_reason(tmp_path, in_repo):
-    file = write(tmp_path, "raise ValueError('bad law')\n")
-    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, file])
+    file = write(tmp_path, law_solution("raise ValueError('bad law')"))
+    result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, file])
     assert result.exit_code == 1
     assert result.stdout == ""
-    assert result.stderr == "invalid: evaluation raised ValueError: bad law\n"
-    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, "--json", file])
+    assert result.stderr == "invalid: capturing the solution raised ValueError: bad law\n"
+    result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, "--json", file])
     assert result.exit_code == 1
     data = json.loads(result.stdout)
     assert not data["valid"] and data["loss"] == "inf"
@@ -95,8 +104,8 @@ def test_evaluate_invalid_solution_exits_1_with_reason(tmp_path, in_repo):
 
 
 def test_evaluate_timeout_option(tmp_path, in_repo):
-    file = write(tmp_path, "import time\ntime.sleep(60)\n")
-    result = CliRunner().invoke(main, ["evaluate", "--task", DOUBLE, "--timeout", "1", file])
+    file = write(tmp_path, law_solution("while True:\n    pass"))
+    result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, "--timeout", "1", file])
     assert result.exit_code == 1
     assert result.stderr == "invalid: exceeded the time limit of 1 s\n"
 
