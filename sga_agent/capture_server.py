@@ -24,23 +24,21 @@ from __future__ import annotations
 
 import importlib
 import json
-import os
 import sys
-import traceback
 from dataclasses import asdict
-from typing import IO, Any
+from typing import Any
 
 from sga_agent import registry
-from sga_agent.isolation import Isolation, die_with_parent, run_confined
+from sga_agent.helper_protocol import answer, describe, first_line, start_helper
+from sga_agent.isolation import Isolation, run_confined
 from sga_agent.sandbox import SandboxLimits
-from sga_agent.task import InvalidSolution, Task
+from sga_agent.task import InvalidSolution, Task, is_out_of_memory
 
 #: Imported before any capture (with the task's ``capture_modules``): a confined process may be
 #: unable to read the files to import them later (as ``nobody``, Python under /root, say).
 PRELOADED = ("math", "cmath", "numbers", "functools", "itertools", "collections", "typing",
              "dataclasses", "enum", "abc", "operator", "random", "json",
              "encodings.idna")  # fmt: skip
-MAX_REASON_CHARS = 300
 TRACEBACK_TAIL_CHARS = 2000
 
 
@@ -49,17 +47,15 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) != 1:
         print("usage: python -m sga_agent.capture_server TASK", file=sys.stderr)
         return 2
-    die_with_parent()  # a helper never outlives the evaluator that started it
-    answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
-    os.dup2(2, 1)  # whatever prints goes to standard error, never into the answers
+    answers = start_helper()
     task = registry.resolve_task(args[0])
     for name in (*PRELOADED, *getattr(task, "capture_modules", ())):
         importlib.import_module(name)
     warm_up = getattr(task, "warm_up_solutions", lambda: [task.seed_solution()])()
     outcomes = [sorted(capture_outcome(task, solution)) for solution in warm_up]
-    _answer(answers, {"ready": True, "warm_up": outcomes})
+    answer(answers, {"ready": True, "warm_up": outcomes})
     for line in sys.stdin:
-        _answer(answers, serve(task, json.loads(line)))
+        answer(answers, serve(task, json.loads(line)))
     return 0
 
 
@@ -97,25 +93,12 @@ def capture_outcome(task: Task, solution: str) -> dict[str, Any]:
         json.dumps(data)  # what cannot be sent is the task's error, found here
         return {"data": data}
     except InvalidSolution as error:
-        return {"invalid": _first_line(str(error))}
-    except MemoryError as error:
-        return {"out_of_memory": _first_line(f"MemoryError: {error}")}
+        return {"invalid": first_line(str(error))}
     except BaseException as error:  # the candidate may even call sys.exit
-        described = f"{type(error).__name__}: {_first_line(str(error))}".rstrip(": ")
-        text = "".join(traceback.format_exception(error))[-TRACEBACK_TAIL_CHARS:]
-        if "allocate memory" in str(error) or "memory allocation" in str(error):
+        described, text = describe(error, TRACEBACK_TAIL_CHARS)
+        if is_out_of_memory(error):
             return {"out_of_memory": described}
         return {"error": described, "traceback": text}
-
-
-def _first_line(text: str) -> str:
-    lines = text.strip().splitlines()
-    return lines[0][:MAX_REASON_CHARS] if lines else ""
-
-
-def _answer(answers: IO[str], reply: dict[str, Any]) -> None:
-    answers.write(json.dumps(reply) + "\n")
-    answers.flush()
 
 
 if __name__ == "__main__":

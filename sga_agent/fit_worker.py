@@ -19,20 +19,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import re
 import resource
 import sys
-import traceback
-from typing import IO, Any
+from typing import Any
 
 from sga_agent import registry
-from sga_agent.isolation import die_with_parent
-from sga_agent.task import Evaluation, EvaluationSettings, Task
+from sga_agent.helper_protocol import answer, describe, start_helper
+from sga_agent.task import Evaluation, EvaluationSettings, Task, is_out_of_memory
 
-#: Native libraries report a failed allocation as a RuntimeError with one of these phrases.
-_OUT_OF_MEMORY = re.compile(r"allocate memory|memory allocation|out of memory", re.IGNORECASE)
-_MAX_MESSAGE_CHARS = 300
 TRACEBACK_TAIL_CHARS = 4000
 
 
@@ -41,9 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) != 2:
         print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB", file=sys.stderr)
         return 2
-    die_with_parent()  # a helper never outlives the evaluator that started it
-    answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
-    os.dup2(2, 1)  # whatever prints goes to standard error, never into the answers
+    answers = start_helper()
     memory = int(args[1]) * 2**20
     resource.setrlimit(resource.RLIMIT_DATA, (memory, memory))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
@@ -52,11 +44,11 @@ def main(argv: list[str] | None = None) -> int:
         failure = None
     except Exception as error:  # a plugin may fail to import in any way
         task, failure = None, _from_exception(f"could not load task {args[0]!r}:", error)
-    _answer(answers, {"ready": failure is None})
+    answer(answers, {"ready": failure is None})
     for line in sys.stdin:
         request = json.loads(line)
         evaluation = failure or score(task, request["data"], request["settings"])
-        _answer(answers, evaluation.to_dict())
+        answer(answers, evaluation.to_dict())
         if evaluation.status == "out_of_memory":
             return 0
     return 0
@@ -88,23 +80,12 @@ def score(task: Task, data: Any, settings: dict[str, Any]) -> Evaluation:
 
 
 def _from_exception(prefix: str, error: BaseException) -> Evaluation:
-    traceback.clear_frames(error.__traceback__)  # free memory before formatting
-    lines = str(error).strip().splitlines()
-    message = lines[0][:_MAX_MESSAGE_CHARS] if lines else ""
-    described = f"{type(error).__name__}: {message}" if message else type(error).__name__
-    formatted = "".join(traceback.format_exception(error))
-    if len(formatted) > TRACEBACK_TAIL_CHARS:  # keep whole lines from the end
-        formatted = formatted[-TRACEBACK_TAIL_CHARS:].partition("\n")[2]
+    described, formatted = describe(error, TRACEBACK_TAIL_CHARS)
     extras = {"traceback": formatted}
-    if isinstance(error, MemoryError) or _OUT_OF_MEMORY.search(str(error)):
+    if is_out_of_memory(error):
         reason = f"exceeded the fit's memory limit ({described})"
         return Evaluation.invalid(reason, status="out_of_memory", extras=extras)
     return Evaluation.invalid(f"{prefix} {described}", status="error", extras=extras)
-
-
-def _answer(answers: IO[str], reply: dict[str, Any]) -> None:
-    answers.write(json.dumps(reply) + "\n")
-    answers.flush()
 
 
 if __name__ == "__main__":

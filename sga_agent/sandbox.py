@@ -406,9 +406,8 @@ def _capture_outcome(
 ) -> dict[str, Any] | Evaluation:
     """The captured data, or the Evaluation that says why there is none."""
     status = reply.get("status")
-    log = ""
     if status == "timeout":
-        return _failure(f"exceeded the time limit of {timeout:g} s", "timeout", log)
+        return _failure(f"exceeded the time limit of {timeout:g} s", "timeout", "")
     if status == "error":
         reason = "not evaluated: the capture process could not be isolated as detected at "
         return Evaluation.invalid(f"{reason}start-up ({reply.get('detail', '')})", status="error")

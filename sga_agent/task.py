@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
@@ -56,6 +57,15 @@ class EvaluationSettings:
             raise ValueError(f"epochs must be a non-negative integer or None, got {self.epochs!r}")
         if self.learning_rate is not None and not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+
+
+#: How native libraries (torch's allocator, Taichi) report a failed allocation.
+_ALLOCATION_FAILURE = re.compile(r"allocate memory|memory allocation|out of memory", re.IGNORECASE)
+
+
+def is_out_of_memory(error: BaseException) -> bool:
+    """Whether ``error`` is a failed allocation (an ``out_of_memory`` outcome)."""
+    return isinstance(error, MemoryError) or bool(_ALLOCATION_FAILURE.search(str(error)))
 
 
 class InvalidSolution(ValueError):

@@ -8,7 +8,6 @@ candidate is fitted (the fit worker, tests), never when the search lists tasks.
 from __future__ import annotations
 
 import math
-import re
 import time
 from typing import Any
 
@@ -18,7 +17,7 @@ import taichi_mpm as tm
 from bridges import laws as torch_laws
 from bridges.rollout import LawError, Rollout
 from bridges.step import torch_dtype
-from sga_agent.task import Evaluation, EvaluationSettings
+from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
 from taichi_mpm import runtime
 from tasks.constitutive import feedback
 from tasks.constitutive.artifacts import encode_positions
@@ -27,9 +26,6 @@ from tasks.constitutive.inner import InnerSettings, NoFiniteEpoch, optimize
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.specs import KNOWN_ELASTIC, ConstitutiveSpec
-
-#: How native libraries (torch's allocator) report a failed allocation.
-_ALLOCATION = re.compile(r"allocate memory|memory allocation|out of memory", re.IGNORECASE)
 
 
 def ensure_runtime(precision: str) -> None:
@@ -90,10 +86,9 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
             seconds=time.perf_counter() - started,
         )
     except Exception as error:  # a law failing inside forward, e.g. a shape mismatch
-        out_of_memory = isinstance(error, MemoryError) or _ALLOCATION.search(str(error))
         return Evaluation.invalid(
             f"the law raised {describe_error(error)} during the simulation",
-            status="out_of_memory" if out_of_memory else "error",
+            status="out_of_memory" if is_out_of_memory(error) else "error",
             seconds=time.perf_counter() - started,
         )
     corners = feedback.corner_particles(observed.positions[0])
