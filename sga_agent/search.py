@@ -11,7 +11,7 @@ asking the model again or re-evaluating what was finished.
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import Future
+from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -218,50 +218,54 @@ class Search:
         """Evaluate (or look up) every candidate; returns the budget that stopped it, if any.
 
         ``candidates`` are (id, code, rejection): a rejected one (no code, failed static
-        checks) is recorded as it is. The rest are submitted together and recorded in order;
-        one whose normalized code was seen before takes that evaluation instead.
+        checks) is recorded as it is. The rest are submitted together. Each evaluation is
+        stored the moment it finishes (a kill loses none that finished); the heap then takes
+        them in the candidates' order, so a run and its resume rank ties alike. A candidate
+        whose normalized code was seen before takes that evaluation instead.
         """
         submitted: dict[str, Future[Evaluation]] = {}  # by fingerprint
-        order: list[tuple[str, str, str, Evaluation | None]] = []
+        owners: dict[str, tuple[str, str]] = {}  # fingerprint -> (candidate, code) evaluated
+        order: list[tuple[str, str, str]] = []
         stopped = ""
         for candidate, code, rejection in candidates:
             key = fingerprint(code)
             known = candidate in self._evaluations or key in self._fingerprints
-            if rejection is None and not known and key not in submitted:
+            if rejection is not None:
+                if candidate not in self._evaluations:
+                    self._store(candidate, code, rejection)
+            elif not known and key not in submitted:
                 limit = self.config.max_evaluations
                 if limit is not None and self.totals.evaluations + len(submitted) >= limit:
                     stopped = f"max_evaluations={limit} reached"
                     break
-                future = self.evaluator.submit(self.config.task, code, self.settings)
-                submitted[key] = future
-            order.append((candidate, code, key, rejection))
-        for candidate, code, key, rejection in order:
-            if candidate in self._evaluations:  # finished before a resume
-                self._record(candidate, code, key, self._evaluations[candidate], stored=True)
-            elif rejection is not None:
-                self._record(candidate, code, key, rejection)
-            elif key in self._fingerprints:
+                submitted[key] = self.evaluator.submit(self.config.task, code, self.settings)
+                owners[key] = (candidate, code)
+            order.append((candidate, code, key))
+        keys = {future: key for key, future in submitted.items()}
+        for future in as_completed(keys):
+            self._store(*owners[keys[future]], future.result())
+        for candidate, code, key in order:
+            if candidate not in self._evaluations:  # the same code as an earlier candidate
                 first, evaluation = self._fingerprints[key]
                 copy = Evaluation.from_dict(evaluation.to_dict())
                 copy.extras["duplicate_of"] = first
-                self._record(candidate, code, key, copy)
-            else:
-                self._record(candidate, code, key, submitted[key].result())
+                self._store(candidate, code, copy)
+            self._push(candidate, code, key, self._evaluations[candidate])
         return stopped
 
-    def _record(
-        self, candidate: str, code: str, key: str, evaluation: Evaluation, stored: bool = False
-    ) -> None:
-        """Push onto the heap; store the evaluation first (unless it came from the store).
+    def _store(self, candidate: str, code: str, evaluation: Evaluation) -> None:
+        """Write a finished evaluation to the run store (its event last: the commit point)."""
+        self._evaluations[candidate] = evaluation
+        self.store.save_evaluation(candidate, code, evaluation)
+        event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
+        self._emit({"type": "evaluation", "candidate": candidate, "evaluation": event})
+
+    def _push(self, candidate: str, code: str, key: str, evaluation: Evaluation) -> None:
+        """Count the evaluation and push it onto the heap.
 
         ``key`` is the code's fingerprint: later identical code takes this evaluation.
         """
         self._fingerprints.setdefault(key, (candidate, evaluation))
-        if not stored:
-            self._evaluations[candidate] = evaluation
-            self.store.save_evaluation(candidate, code, evaluation)
-            event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
-            self._emit({"type": "evaluation", "candidate": candidate, "evaluation": event})
         self.totals.evaluations += "duplicate_of" not in evaluation.extras
         if evaluation.valid:
             self.totals.valid += 1

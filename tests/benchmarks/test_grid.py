@@ -85,6 +85,7 @@ def event_logs(out: Path) -> dict[Path, bytes]:
     return {path: path.read_bytes() for path in out.glob("*/*/seed-*/*/events.jsonl")}
 
 
+@pytest.mark.slow
 def test_backbones_grid_writes_table_and_chart_and_resumes(tmp_path, registered):
     recorded = tmp_path / "recorded"  # the runs replayed below: one per task and seed
     result = script("backbones", "--tasks", TASKS, "--models", "builtin", "--preset", "cot",

@@ -154,6 +154,7 @@ def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
     assert not leaks(result.output)
 
 
+@pytest.mark.slow
 def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit):
     """A third of the granular candidates that pass the static checks, in a real search."""
     from sga_agent import registry

@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from tests.sga_agent.openai_server import ScriptedOpenAIServer
 
 KEY = "sk-test-not-a-real-key-0123456789"
@@ -119,8 +121,23 @@ def test_search_end_to_end(tmp_path):
     assert KEY not in everything and KEY not in run.stderr
 
 
+def fitted_in_iteration_1(log: Path) -> int:
+    """How many iteration-1 candidates the sandbox finished (rejections are stored at once)."""
+    submitted = {"01-exploit-00", "01-exploit-01", "01-explore-01", "01-explore-02"}
+    fitted = 0
+    for line in log.read_text().splitlines():
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line being written
+        fitted += event.get("type") == "evaluation" and event.get("candidate") in submitted
+    return fitted
+
+
+@pytest.mark.slow
 def test_killed_search_resumes_to_the_same_heap(tmp_path):
-    """kill -9 during the evaluations of iteration 1, resume, compare with a replayed run."""
+    """kill -9 once the first evaluation of iteration 1 is stored, resume, compare with a
+    replayed run. Each evaluation is stored as it finishes, so the others are still running."""
     with ScriptedOpenAIServer(SCRIPT) as server:
         process = subprocess.Popen(
             search_command(tmp_path / "killed", *model(server.url)),
@@ -131,15 +148,16 @@ def test_killed_search_resumes_to_the_same_heap(tmp_path):
         deadline = time.time() + 600
         while time.time() < deadline:
             logs = list((tmp_path / "killed").glob("*/events.jsonl"))
-            if logs and logs[0].read_text().count('"type": "evaluation"') >= 2:
+            if logs and fitted_in_iteration_1(logs[0]) >= 1:
                 events = logs[0]
                 break
-            time.sleep(0.2)
+            time.sleep(0.05)
         os.killpg(process.pid, signal.SIGKILL)
         process.wait()
     assert events is not None, "the search never got to iteration 1"
     folder = events.parent
     assert not (folder / "summary.json").exists()
+    assert fitted_in_iteration_1(events) < 4, "the kill came after every evaluation finished"
 
     resumed = subprocess.run(
         [sys.executable, "-m", "sga_agent", "resume", str(folder), "--json"],

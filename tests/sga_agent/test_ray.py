@@ -250,6 +250,7 @@ def ray_children(binary: str) -> list[int]:
 
 
 @needs_ray
+@pytest.mark.slow
 def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path):
     """Every later task would fail: the search stops, as if killed, and can be resumed.
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import re
+import threading
+import time
 from concurrent.futures import Future
 
 import pytest
@@ -158,6 +160,51 @@ def test_resume_reuses_answers_and_evaluations(tmp_path):
     assert torn == '{"type": "evaluation", "cand'
     assert len(store.events()) == 1 + len(kept) + len(after)
     assert store.recorded().finished
+
+
+class FinishesBackwards(LossInCode):
+    """Evaluator double whose evaluations finish last-submitted first: an evaluation is only
+    finished once the one submitted after it is in the run store."""
+
+    def __init__(self, store: RunStore, batches: list[int]) -> None:
+        super().__init__()
+        self.store, self.batches, self.pending = store, list(batches), []
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        finished = super().submit(task, solution, settings)
+        future: Future[Evaluation] = Future()
+        self.pending.append((future, finished.result()))
+        if len(self.pending) == self.batches[0]:
+            self.batches.pop(0)
+            threading.Thread(target=self._finish_backwards, daemon=True).start()
+        return future
+
+    def _finish_backwards(self) -> None:
+        pending, self.pending = self.pending, []
+        for future, evaluation in reversed(pending):
+            stored = len(self._stored())
+            future.set_result(evaluation)
+            deadline = time.time() + 10
+            while len(self._stored()) == stored and time.time() < deadline:
+                time.sleep(0.01)
+
+    def _stored(self) -> list[str]:
+        return [e["candidate"] for e in self.store.events() if e["type"] == "evaluation"]
+
+
+def test_each_evaluation_is_stored_when_it_finishes(tmp_path):
+    """A kill while one evaluation runs loses none of those that finished after it started."""
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0)]
+    cfg = config(iterations=1)
+    store = RunStore.create(tmp_path, cfg, {})
+    evaluator = FinishesBackwards(store, batches=[1, 3])  # the seed, then iteration 1
+    proposer = Scripted(answers)
+    search = Search(cfg, FakeTask(), proposer, evaluator, store)
+    search.run()
+    stored = [e["candidate"] for e in store.events() if e["type"] == "evaluation"]
+    assert stored == ["00-seed", "01-explore-01", "01-explore-00", "01-exploit-00"]
+    heap = [entry.candidate for entry in search.heap.top(10)]
+    assert heap == ["01-explore-00", "01-exploit-00", "01-explore-01", "00-seed"]
 
 
 def test_replay_needs_no_model(tmp_path):

@@ -98,6 +98,7 @@ def test_python_dash_m_runs_the_cli():
     assert "demo" in result.stdout
 
 
+@pytest.mark.slow
 def test_warmup_compiles_and_reports():
     result = CliRunner().invoke(main, ["warmup", "--precision", "float64"])
     assert result.exit_code == 0, result.output

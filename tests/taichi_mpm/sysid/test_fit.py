@@ -31,7 +31,7 @@ def relative_errors(found: dict, truth: dict) -> dict:
     return {name: abs(found[name] / truth[name] - 1.0) for name in found}
 
 
-@pytest.mark.parametrize("optimizer", ["lbfgs", "adam"])
+@pytest.mark.parametrize("optimizer", ["lbfgs", pytest.param("adam", marks=pytest.mark.slow)])
 def test_neo_hookean_E_and_nu_recovered_from_guesses_off_by_3x(optimizer):
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     observation = synthetic(truth)
@@ -82,7 +82,7 @@ PLASTIC_CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(PLASTIC_CASES))
-@pytest.mark.parametrize("noise", [0.0, 0.01])
+@pytest.mark.parametrize("noise", [0.0, pytest.param(0.01, marks=pytest.mark.slow)])
 def test_plastic_parameters_recovered(case, noise):
     truth, name, guess = PLASTIC_CASES[case]
     observation = synthetic(truth, noise=noise)
@@ -109,6 +109,7 @@ def test_fit_rejects_unknown_parameters_and_optimizers():
         fit(observation, material, optimizer="sgd")
 
 
+@pytest.mark.slow
 def test_initial_velocity_fitted_jointly_when_not_observed():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     observation = synthetic(truth)
@@ -147,6 +148,7 @@ def test_unstable_step_backs_off_instead_of_crashing():
     assert np.isfinite(result.loss) and result.loss < result.loss_curve[0]
 
 
+@pytest.mark.slow
 def test_fit_from_a_subset_of_particles_and_sparse_frames():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     scene = thrown_cube()

@@ -1,6 +1,7 @@
 """identify() reports what the observation determines, and what it cannot."""
 
 import numpy as np
+import pytest
 
 import taichi_mpm as tm
 from taichi_mpm.sysid import identify, observation_from_times
@@ -9,6 +10,7 @@ from tests.taichi_mpm.sysid.test_fit import synthetic
 LBFGS = {"optimizer": "lbfgs", "learning_rate": 0.5, "tolerance": 1e-7}
 
 
+@pytest.mark.slow
 def test_impact_determines_E_and_nu_and_restarts_agree():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     result = identify(

@@ -70,8 +70,10 @@ IMAGINARY_START = {
     [
         ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}, 16,
          0.08),
-        ("plasticine", {"log_yield_stress": math.log(6e4)}, 7, 0.15),
-        ("imaginary", IMAGINARY_START, 15, None),  # the task's L-BFGS: no learning rate
+        pytest.param("plasticine", {"log_yield_stress": math.log(6e4)}, 7, 0.15,
+                     marks=pytest.mark.slow),
+        pytest.param("imaginary", IMAGINARY_START, 15, None,  # the task's L-BFGS: no rate
+                     marks=pytest.mark.slow),
     ],
 )  # fmt: skip
 def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epochs, learning_rate):
