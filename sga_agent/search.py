@@ -223,8 +223,8 @@ class Search:
         them in the candidates' order, so a run and its resume rank ties alike. A candidate
         whose normalized code was seen before takes that evaluation instead.
         """
-        submitted: dict[str, Future[Evaluation]] = {}  # by fingerprint
-        owners: dict[str, tuple[str, str]] = {}  # fingerprint -> (candidate, code) evaluated
+        submitted: set[str] = set()  # fingerprints
+        pending: dict[Future[Evaluation], tuple[str, str]] = {}  # -> (candidate, code)
         order: list[tuple[str, str, str]] = []
         stopped = ""
         for candidate, code, rejection in candidates:
@@ -238,12 +238,13 @@ class Search:
                 if limit is not None and self.totals.evaluations + len(submitted) >= limit:
                     stopped = f"max_evaluations={limit} reached"
                     break
-                submitted[key] = self.evaluator.submit(self.config.task, code, self.settings)
-                owners[key] = (candidate, code)
+                submitted.add(key)
+                pending[self.evaluator.submit(self.config.task, code, self.settings)] = (
+                    candidate, code,
+                )  # fmt: skip
             order.append((candidate, code, key))
-        keys = {future: key for key, future in submitted.items()}
-        for future in as_completed(keys):
-            self._store(*owners[keys[future]], future.result())
+        for future in as_completed(pending):
+            self._store(*pending[future], future.result())
         for candidate, code, key in order:
             if candidate not in self._evaluations:  # the same code as an earlier candidate
                 first, evaluation = self._fingerprints[key]

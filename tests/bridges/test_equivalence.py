@@ -34,7 +34,9 @@ PLASTIC = {
     ),
 }
 MATERIALS = {name: tm.Material(law, tm.NoPlasticity()) for name, law in ELASTIC.items()}
-MATERIALS.update({name: tm.Material(ELASTIC["stvk_hencky"], law) for name, law in PLASTIC.items()})
+MATERIALS.update(
+    {name: tm.Material(ELASTIC["stvk_hencky"], law) for name, law in PLASTIC.items()}
+)
 
 
 def _observed(scene: tm.Scene) -> np.ndarray:

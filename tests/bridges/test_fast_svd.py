@@ -38,7 +38,9 @@ print(json.dumps({
 
 
 def test_taichi_svd_in_float32():
-    out = subprocess.run([sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True
+    )
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["before"] and result["float64"]
     assert result["reconstruction"] < 1e-5
