@@ -1,16 +1,18 @@
-"""Time of one candidate evaluation of a constitutive-law task (paper scene, float32, CPU).
+"""Seconds per epoch of a constitutive-law evaluation, ours beside the original's, in one run.
 
-Each task runs in a fresh process (so its peak memory is its own): the ground-truth law
-started 2x off is captured (in that process, as it is our own example law; untimed: see
-``benchmarks/sandbox_overhead.py`` for the capture's cost) and fitted for ``--epochs`` epochs
-(one epoch: the 1000-step teacher-forced forward pass and its segment-wise backward, with the
-law rebuilt from its graph in the loop). Printed: the whole evaluation, the wall time per
-epoch, the peak resident memory (and, as "base", the memory of the process once torch and
-Taichi are loaded and started), and the ratio to the per-epoch times the issue reports for the
-original authors' Warp + torch code on this machine (elastic 9-14 s, plasticine 17-23 s, about
-2 GB). Usage::
+An epoch is the paper's inner-loop step on its scene (1000 particles, 20^3 grid, 1000 steps,
+teacher forcing every 100): the forward rollout, the position loss, backward, gradient
+clipping and one Adam step, with the ground-truth law started 2x off. Ours runs as
+``evaluate`` runs it (the law captured into a graph, untimed, and fitted in this process);
+the original (github.com/PingchuanMa/SGA, Warp + torch) runs through
+``benchmarks/original_sga.py`` with 1 torch thread. The two alternate, task by task, for
+``--rounds`` rounds, each run in a fresh process (so its peak memory is its own), and the
+table gives the minimum, median and maximum epoch over all rounds, the ratio of the medians,
+the peak resident memory and the load average around the run. Without ``--original`` only our
+own numbers are printed. Usage::
 
-    python benchmarks/evaluate_speed.py [--epochs 30] [--tasks elastic plasticine] [--profile]
+    python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
+        [--original ~/SGA --original-python ~/orig-venv/bin/python] [--profile]
 """
 
 from __future__ import annotations
@@ -18,7 +20,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -28,7 +32,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from make_ground_truth import TWICE_OFF, truth_code  # noqa: E402
 
-AUTHORS_SECONDS_PER_EPOCH = {"elastic": (9.0, 14.0), "plasticine": (17.0, 23.0)}
+ORIGINAL_DRIVER = Path(__file__).resolve().parent / "original_sga.py"
 
 
 def law_code(task: str) -> str:
@@ -88,34 +92,97 @@ def _resident_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def run_ours(task: str, epochs: int, profile: bool) -> dict:
+    """Our evaluation of ``task`` in a fresh process."""
+    command = [sys.executable, __file__, "--child", task, "--epochs", str(epochs)]
+    if profile:
+        command.append("--profile")
+    out = subprocess.run(command, capture_output=True, text=True, check=True)
+    if profile:
+        print(out.stderr)
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"epoch_s": row["epoch_seconds"], "peak_mb": row["peak_mb"], "row": row}
+
+
+def run_original(task: str, epochs: int, args: argparse.Namespace) -> dict:
+    """The original's epochs of ``task`` in a fresh process (one untimed warm-up epoch)."""
+    command = [str(args.original_python), str(ORIGINAL_DRIVER), "epoch", task, str(epochs),
+               "--warmup", "1", "--data", str(args.original_data),
+               "--work", str(args.original_data / "work")]  # fmt: skip
+    env = os.environ | {"SGA_ORIGINAL": str(args.original), "OMP_NUM_THREADS": "1"}
+    out = subprocess.run(command, capture_output=True, text=True, env=env)
+    if out.returncode != 0:
+        sys.exit(f"the original's {task} epoch failed:\n{out.stderr[-3000:]}")
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"epoch_s": row["epoch_s"], "peak_mb": row["peak_mb"], "row": row}
+
+
+def prepare_original(args: argparse.Namespace) -> None:
+    """Write the original's ground truth of each task once (untimed)."""
+    env = os.environ | {"SGA_ORIGINAL": str(args.original), "OMP_NUM_THREADS": "1"}
+    for task in args.tasks:
+        dataset = args.original_data / ("neohookean" if task == "elastic" else task)
+        if (dataset / "state" / "ckpt.pt").exists():
+            continue
+        print(f"writing the original's {task} ground truth to {dataset} ...", flush=True)
+        subprocess.run([str(args.original_python), str(ORIGINAL_DRIVER), "dataset", task,
+                        str(args.original_data)], env=env, check=True)  # fmt: skip
+
+
+def spread(values: list[float]) -> str:
+    return f"{min(values):5.2f} / {statistics.median(values):5.2f} / {max(values):5.2f}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--epochs", type=int, default=30)
-    parser.add_argument("--tasks", nargs="+", default=["elastic", "plasticine"], choices=TWICE_OFF)
-    parser.add_argument("--profile", action="store_true", help="cProfile of the evaluation")
+    parser.add_argument("--epochs", type=int, default=3, help="timed epochs per run")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds per task")
+    parser.add_argument("--tasks", nargs="+", default=["elastic", "plasticine"],
+                        choices=["elastic", "plasticine"])  # fmt: skip
+    parser.add_argument("--original", type=Path, help="a checkout of github.com/PingchuanMa/SGA")
+    parser.add_argument("--original-python", type=Path, default=Path(sys.executable),
+                        help="a Python with warp-lang 1.1.0, torch and numpy < 2")  # fmt: skip
+    parser.add_argument("--original-data", type=Path,
+                        default=Path.home() / ".cache" / "sga-benchmarks" / "original",
+                        help="where the original's ground truth is written once")  # fmt: skip
+    parser.add_argument("--profile", action="store_true", help="cProfile of our evaluation")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(run_one(args.child, args.epochs, args.profile)))
         return
-    print(f"{'task':<11} {'epochs':>6} {'total s':>8} {'s/epoch':>8} {'peak MB':>8} {'base MB':>8} "
-          f"{'loss start -> end':>22} {'authors s/epoch':>16} {'speed-up':>9}")  # fmt: skip
+    if args.original:
+        prepare_original(args)
+    load_before = os.getloadavg()
+    started = time.perf_counter()
+    runs: dict[tuple[str, str], list[dict]] = {}
+    for round_index in range(args.rounds):
+        for task in args.tasks:
+            runs.setdefault(("ours", task), []).append(run_ours(task, args.epochs, args.profile))
+            if args.original:
+                runs.setdefault(("original", task), []).append(
+                    run_original(task, args.epochs, args)
+                )
+            print(f"round {round_index + 1}/{args.rounds} {task}: done", file=sys.stderr)
+    load_after = os.getloadavg()
+    print(f"{os.cpu_count()} cores; load average (1/5/15 min) before "
+          f"{'/'.join(f'{x:.2f}' for x in load_before)}, after "
+          f"{'/'.join(f'{x:.2f}' for x in load_after)}; {time.perf_counter() - started:.0f} s; "
+          f"{args.rounds} rounds x {args.epochs} epochs")  # fmt: skip
+    print(f"{'task':<11} {'impl':<9} {'s/epoch min / median / max':>27} {'peak MB':>8} "
+          f"{'speed-up (medians)':>19}")  # fmt: skip
     for task in args.tasks:
-        command = [sys.executable, __file__, "--child", task, "--epochs", str(args.epochs)]
-        if args.profile:
-            command.append("--profile")
-        out = subprocess.run(command, capture_output=True, text=True, check=True)
-        if args.profile:
-            print(out.stderr)
-        row = json.loads(out.stdout.strip().splitlines()[-1])
-        per_epoch = sum(row["epoch_seconds"]) / max(len(row["epoch_seconds"]), 1)
-        low, high = AUTHORS_SECONDS_PER_EPOCH.get(task, (math.nan, math.nan))
-        authors = f"{low:.0f}-{high:.0f}" if math.isfinite(low) else "n/a"
-        speedup = f"{low / per_epoch:.1f}-{high / per_epoch:.1f}x" if math.isfinite(low) else ""
-        memory = f"{row['peak_mb']:8.0f} {row['baseline_mb']:8.0f}"
-        losses = f"{row['first_loss']:10.2e} -> {row['loss']:9.2e}"
-        print(f"{task:<11} {row['epochs']:>6} {row['seconds']:8.1f} {per_epoch:8.2f} {memory} "
-              f"{losses} {authors:>16} {speedup:>9}")  # fmt: skip
+        medians = {}
+        for impl in ("original", "ours"):
+            if (impl, task) not in runs:
+                continue
+            epochs = [s for run in runs[impl, task] for s in run["epoch_s"]]
+            peak = max(run["peak_mb"] for run in runs[impl, task])
+            medians[impl] = statistics.median(epochs)
+            ratio = ""
+            if impl == "ours" and "original" in medians:
+                ratio = f"{medians['original'] / medians['ours']:.2f}x"
+            print(f"{task:<11} {impl:<9} {spread(epochs):>27} {peak:8.0f} {ratio:>19}")
 
 
 if __name__ == "__main__":

@@ -1,11 +1,17 @@
 """Taichi kernels that move one MPM step's data between torch tensors and Taichi arrays.
 
 A Taichi launch costs ~25 us per torch-tensor argument on this CPU, more than the copy itself,
-so each step's particle data crosses in one packed (N, 33) torch tensor (``COL_*``: x, v, C,
-F, stress in row-major order) and comes back in one (N, 24) tensor (x, v, C, F). Torch tensors
-are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU); the kernels read
-slot 0 (the step's input) and write slot 1 (its output) of the time-indexed Taichi arrays that
-:mod:`taichi_mpm.kernels.transfer` works on.
+so each step's particle data crosses in one packed (B * N, 33) torch tensor (``COL_*``: x, v,
+C, F, stress in row-major order) and comes back in one (B * N, 24) tensor (x, v, C, F). Torch
+tensors are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU).
+
+A step may advance B independent copies of a scene at once (a batch: the segments of a
+teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors being copy b.
+Copy b lives in slots ``2 b`` (the step's input) and ``2 b + 1`` (its output) of the
+time-indexed Taichi arrays that :mod:`taichi_mpm.kernels.transfer` works on, its grid in grid
+slot ``2 b``: the transfer functions index particles and grid with the same slot, so every copy
+keeps its own grid and walls. The differentiated kernels (:func:`p2g`, :func:`grid_update`,
+:func:`g2p`) hold nothing but their loops, as Taichi's autodiff requires.
 """
 
 import taichi as ti
@@ -57,30 +63,31 @@ def _transfer(
     settings: ti.template(),
     serial: ti.template(),
 ):
-    """Load the packed input into slot 0, then P2G, grid update and G2P into slot 1."""
+    """Load the packed input into each copy's input slot, then P2G, grid update and G2P."""
     dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
+    B, N, n = x.shape[0] // 2, x.shape[1], grid_mass.shape[1]
     ti.loop_config(serialize=serial)
-    for p in range(x.shape[1]):
-        x[0, p] = _vec(packed, p, COL_X)
-        v[0, p] = _vec(packed, p, COL_V)
-        C[0, p] = _mat(packed, p, COL_C)
-        F_corrected[0, p] = _mat(packed, p, COL_F)
-        stress[0, p] = _mat(packed, p, COL_STRESS)
-    n = grid_mass.shape[1]
+    for b, p in ti.ndrange(B, N):
+        row = b * N + p
+        x[2 * b, p] = _vec(packed, row, COL_X)
+        v[2 * b, p] = _vec(packed, row, COL_V)
+        C[2 * b, p] = _mat(packed, row, COL_C)
+        F_corrected[2 * b, p] = _mat(packed, row, COL_F)
+        stress[2 * b, p] = _mat(packed, row, COL_STRESS)
     ti.loop_config(serialize=serial)
-    for i, j, k in ti.ndrange(n, n, n):
-        grid_mass[0, i, j, k] = 0.0
-        grid_momentum[0, i, j, k] = ti.Vector.zero(float, 3)
+    for b, i, j, k in ti.ndrange(B, n, n, n):
+        grid_mass[2 * b, i, j, k] = 0.0
+        grid_momentum[2 * b, i, j, k] = ti.Vector.zero(float, 3)
     ti.loop_config(serialize=serial)
-    for p in range(x.shape[1]):
-        scatter(x, v, C, stress, 0, p, grid_mass, grid_momentum, dx, dt, volume, mass)
+    for b, p in ti.ndrange(B, N):
+        scatter(x, v, C, stress, 2 * b, p, grid_mass, grid_momentum, dx, dt, volume, mass)
     ti.loop_config(serialize=serial)
-    for i, j, k in ti.ndrange(n, n, n):
-        update_node(grid_mass, grid_momentum, 0, i, j, k, grid_velocity, dt,
+    for b, i, j, k in ti.ndrange(B, n, n, n):
+        update_node(grid_mass, grid_momentum, 2 * b, i, j, k, grid_velocity, dt,
                     ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
     ti.loop_config(serialize=serial)
-    for p in range(x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, 0, p, dx, dt)
+    for b, p in ti.ndrange(B, N):
+        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
 
 
 @ti.kernel
@@ -108,16 +115,17 @@ def step_forward(
     friction: float,
     serial: ti.template(),
 ):
-    """One step: packed (N, 33) input -> packed (N, 24) output (x, v, C, F_trial)."""
+    """One step: packed (B * N, 33) input -> packed (B * N, 24) output (x, v, C, F_trial)."""
     _transfer(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum, grid_velocity,
               (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
               serial)  # fmt: skip
     ti.loop_config(serialize=serial)
-    for p in range(x.shape[1]):
-        _put_vec(out, p, COL_X, x[1, p])
-        _put_vec(out, p, COL_V, v[1, p])
-        _put_mat(out, p, COL_C, C[1, p])
-        _put_mat(out, p, COL_F, F[1, p])
+    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
+        row = b * x.shape[1] + p
+        _put_vec(out, row, COL_X, x[2 * b + 1, p])
+        _put_vec(out, row, COL_V, v[2 * b + 1, p])
+        _put_mat(out, row, COL_C, C[2 * b + 1, p])
+        _put_mat(out, row, COL_F, F[2 * b + 1, p])
 
 
 @ti.kernel
@@ -159,22 +167,23 @@ def recompute_and_seed(
               (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
               serial)  # fmt: skip
     ti.loop_config(serialize=serial)
-    for p in range(x.shape[1]):
-        x_grad[0, p] = ti.Vector.zero(float, 3)
-        v_grad[0, p] = ti.Vector.zero(float, 3)
-        C_grad[0, p] = ti.Matrix.zero(float, 3, 3)
-        F_corrected_grad[0, p] = ti.Matrix.zero(float, 3, 3)
-        stress_grad[0, p] = ti.Matrix.zero(float, 3, 3)
-        x_grad[1, p] = _vec(output_grad, p, COL_X)
-        v_grad[1, p] = _vec(output_grad, p, COL_V)
-        C_grad[1, p] = _mat(output_grad, p, COL_C)
-        F_grad[1, p] = _mat(output_grad, p, COL_F)
+    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
+        row = b * x.shape[1] + p
+        x_grad[2 * b, p] = ti.Vector.zero(float, 3)
+        v_grad[2 * b, p] = ti.Vector.zero(float, 3)
+        C_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
+        F_corrected_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
+        stress_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
+        x_grad[2 * b + 1, p] = _vec(output_grad, row, COL_X)
+        v_grad[2 * b + 1, p] = _vec(output_grad, row, COL_V)
+        C_grad[2 * b + 1, p] = _mat(output_grad, row, COL_C)
+        F_grad[2 * b + 1, p] = _mat(output_grad, row, COL_F)
     n = grid_mass.shape[1]
     ti.loop_config(serialize=serial)
-    for i, j, k in ti.ndrange(n, n, n):
-        grid_mass_grad[0, i, j, k] = 0.0
-        grid_momentum_grad[0, i, j, k] = ti.Vector.zero(float, 3)
-        grid_velocity_grad[0, i, j, k] = ti.Vector.zero(float, 3)
+    for b, i, j, k in ti.ndrange(x.shape[0] // 2, n, n, n):
+        grid_mass_grad[2 * b, i, j, k] = 0.0
+        grid_momentum_grad[2 * b, i, j, k] = ti.Vector.zero(float, 3)
+        grid_velocity_grad[2 * b, i, j, k] = ti.Vector.zero(float, 3)
 
 
 @ti.kernel
@@ -187,14 +196,76 @@ def store_input_gradients(
     input_grad: ti.types.ndarray(),
     serial: ti.template(),
 ):
-    """dL/d(input) from the slot-0 adjoints into one packed (N, 33) torch tensor."""
+    """dL/d(input) from the input-slot adjoints into one packed (B * N, 33) torch tensor."""
     ti.loop_config(serialize=serial)
-    for p in range(x_grad.shape[1]):
-        _put_vec(input_grad, p, COL_X, x_grad[0, p])
-        _put_vec(input_grad, p, COL_V, v_grad[0, p])
-        _put_mat(input_grad, p, COL_C, C_grad[0, p])
-        _put_mat(input_grad, p, COL_F, F_corrected_grad[0, p])
-        _put_mat(input_grad, p, COL_STRESS, stress_grad[0, p])
+    for b, p in ti.ndrange(x_grad.shape[0] // 2, x_grad.shape[1]):
+        row = b * x_grad.shape[1] + p
+        _put_vec(input_grad, row, COL_X, x_grad[2 * b, p])
+        _put_vec(input_grad, row, COL_V, v_grad[2 * b, p])
+        _put_mat(input_grad, row, COL_C, C_grad[2 * b, p])
+        _put_mat(input_grad, row, COL_F, F_corrected_grad[2 * b, p])
+        _put_mat(input_grad, row, COL_STRESS, stress_grad[2 * b, p])
+
+
+@ti.kernel
+def p2g(
+    x: ti.types.ndarray(),
+    v: ti.types.ndarray(),
+    C: ti.types.ndarray(),
+    stress: ti.types.ndarray(),
+    grid_mass: ti.types.ndarray(),
+    grid_momentum: ti.types.ndarray(),
+    dx: float,
+    dt: float,
+    volume: float,
+    mass: float,
+    serial: ti.template(),
+):
+    """P2G of every copy onto its own grid (differentiated by the backward pass)."""
+    ti.loop_config(serialize=serial)
+    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
+        scatter(x, v, C, stress, 2 * b, p, grid_mass, grid_momentum, dx, dt, volume, mass)
+
+
+@ti.kernel
+def grid_update(
+    grid_mass: ti.types.ndarray(),
+    grid_momentum: ti.types.ndarray(),
+    grid_velocity: ti.types.ndarray(),
+    dt: float,
+    gx: float,
+    gy: float,
+    gz: float,
+    wall_kind: ti.i32,
+    thickness: ti.i32,
+    friction: float,
+    serial: ti.template(),
+):
+    """Grid update of every copy's grid (differentiated by the backward pass)."""
+    ti.loop_config(serialize=serial)
+    for b, i, j, k in ti.ndrange(
+        grid_mass.shape[0] // 2, grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]
+    ):
+        update_node(grid_mass, grid_momentum, 2 * b, i, j, k, grid_velocity, dt,
+                    ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
+
+
+@ti.kernel
+def g2p(
+    x: ti.types.ndarray(),
+    v: ti.types.ndarray(),
+    C: ti.types.ndarray(),
+    F: ti.types.ndarray(),
+    F_corrected: ti.types.ndarray(),
+    grid_velocity: ti.types.ndarray(),
+    dx: float,
+    dt: float,
+    serial: ti.template(),
+):
+    """G2P of every copy from its own grid (differentiated by the backward pass)."""
+    ti.loop_config(serialize=serial)
+    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
+        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
 
 
 @ti.kernel

@@ -6,7 +6,9 @@ observed one and back-propagates the mean squared position error into the laws' 
 segment at a time, so memory holds one segment's graph, never the whole trajectory:
 
 * with ``resets`` (teacher forcing), each segment starts from the observed state, so the
-  segments are independent: each is run, scored and differentiated in turn;
+  segments are independent: ``batch`` of them at a time run as one batch of independent copies
+  of the scene (each on its own grid, see :class:`bridges.step.Transfer`), so a 1000-step
+  epoch of 100-step segments takes 100 steps of ten copies instead of 1000 steps of one;
 * without, the state at each segment start is kept, and the backward pass re-runs the
   segments last to first, carrying dL/d(state) across their boundaries (checkpointing).
 
@@ -64,6 +66,12 @@ class State:
         """Entry ``index`` of stacked state arrays (as ``taichi_mpm.Simulator.states``)."""
         return cls(*(torch.as_tensor(states[name][index], dtype=dtype) for name in "xvCF"))
 
+    @classmethod
+    def stacked(cls, states: list[State]) -> State:
+        """The states of several copies of a scene as one batch, copy after copy."""
+        columns = zip(*(state.tensors() for state in states), strict=True)
+        return cls(*(torch.cat(parts) for parts in columns))
+
     def tensors(self) -> tuple[torch.Tensor, ...]:
         return (self.x, self.v, self.C, self.F)
 
@@ -102,29 +110,39 @@ class Rollout:
         self.elastic = elastic
         self.transfer = transfer if transfer is not None else Transfer(scene)
         self.dtype = self.transfer.dtype
+        self._batched: dict[int, Transfer] = {1: self.transfer}
 
-    def step(self, state: State) -> State:
-        """One differentiable step."""
+    def transfer_for(self, batch: int) -> Transfer:
+        """The Taichi arrays for ``batch`` copies of the scene (made once per batch size)."""
+        if batch not in self._batched:
+            self._batched[batch] = Transfer(self.scene, batch=batch)
+        return self._batched[batch]
+
+    def step(self, state: State, batch: int = 1) -> State:
+        """One differentiable step of ``batch`` independent copies (their states stacked)."""
         F = self.plastic(state.F)
         stress = self.elastic(F)
-        return State(*mpm_step(state.x, state.v, state.C, F, stress, self.transfer))
+        return State(*mpm_step(state.x, state.v, state.C, F, stress, self.transfer_for(batch)))
 
     def check_laws(self, state: State) -> None:
-        """Check that both laws map ``state.F`` to finite (N, 3, 3) tensors.
+        """Check that both laws map ``state.F`` to finite (N, 3, 3) tensors, particle by
+        particle.
 
-        Raises :class:`LawError` for a wrong type or shape, :class:`UnstableSimulation` for
-        NaN or inf.
+        Raises :class:`LawError` for a wrong type or shape or a law that mixes particles,
+        :class:`UnstableSimulation` for NaN or inf.
         """
         expected = tuple(state.F.shape)
         with torch.no_grad(), stable_linalg():
             F = _checked(self.plastic(state.F), "plastic law", "F_corrected", expected)
             _checked(self.elastic(F), "elastic law", "Kirchhoff stress", expected)
+            _check_per_particle(self.plastic, state.F, "plastic law")
+            _check_per_particle(self.elastic, F, "elastic law")
 
-    def run(self, state: State, steps: int, on_step=None) -> State:
+    def run(self, state: State, steps: int, on_step=None, batch: int = 1) -> State:
         """``steps`` steps from ``state``; ``on_step(step_index, state)`` after each."""
         with stable_linalg():
             for s in range(steps):
-                state = self.step(state)
+                state = self.step(state, batch)
                 if on_step is not None:
                     on_step(s + 1, state)
         return state
@@ -145,6 +163,7 @@ def trajectory_loss(
     resets: dict[str, np.ndarray] | None = None,
     segment: int = 100,
     backward: bool = True,
+    batch: int = 1,
 ) -> RolloutResult:
     """Mean squared position error against ``observed``, differentiated segment by segment.
 
@@ -162,6 +181,10 @@ def trajectory_loss(
         Steps per segment.
     backward : bool
         Back-propagate (otherwise only the loss and positions).
+    batch : int
+        With teacher forcing, segments of equal length run this many at a time, as one batch
+        of copies of the scene. The result is the same (to round-off) for every batch size;
+        memory grows with it (the graph of ``batch`` segments is held at once).
 
     Raises
     ------
@@ -170,8 +193,8 @@ def trajectory_loss(
     """
     observed = torch.as_tensor(observed, dtype=rollout.dtype)
     steps = observed.shape[0] - 1
-    if steps < 1 or segment < 1:
-        raise ValueError("observed needs at least two frames and segment must be >= 1")
+    if steps < 1 or segment < 1 or batch < 1:
+        raise ValueError("observed needs at least two frames; segment and batch must be >= 1")
     starts = list(range(0, steps, segment))
     if resets is not None and len(resets["x"]) < len(starts):
         raise ValueError(
@@ -185,17 +208,50 @@ def trajectory_loss(
     if resets is None and backward:
         return _checkpointed(rollout, observed, starts, segment, scale, positions)
     total = 0.0
+    if resets is None:  # forward only: one segment after the other
+        groups = [[index] for index in range(len(starts))]
+    else:
+        groups = _groups(starts, steps, segment, batch)
     state = first
-    for index, start in enumerate(starts):
+    for group in groups:
         if resets is not None:
-            state = _start_state(rollout, resets, index)
+            state = State.stacked([_start_state(rollout, resets, index) for index in group])
         with torch.set_grad_enabled(backward):
-            loss, state = _segment(rollout, state, observed, start, segment, scale, positions)
+            group_starts = [starts[index] for index in group]
+            loss, state = _segment(rollout, state, observed, group_starts, segment, scale,
+                                   positions)  # fmt: skip
             if backward:
                 loss.backward()
         total += loss.item()
         state = state.detached()
     return RolloutResult(total, positions)
+
+
+def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_bytes: int) -> int:
+    """How many teacher-forced segments of ``segment`` steps fit ``budget_bytes`` of graph.
+
+    Measured, not guessed: one step from ``state`` is run with gradients and the tensors its
+    graph saves (the laws' intermediates and the step's packed input) are counted; a segment
+    holds ``segment`` such steps per copy. At least 1.
+    """
+    saved: dict[int, int] = {}
+
+    def count(tensor: torch.Tensor) -> torch.Tensor:
+        storage = tensor.untyped_storage()
+        saved[storage.data_ptr()] = storage.nbytes()
+        return tensor
+
+    with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor), stable_linalg():
+        end = rollout.step(state.detached())
+        ((end.x - state.x) ** 2).sum()  # the loss term of a step
+    return max(1, budget_bytes // max(1, sum(saved.values()) * segment))
+
+
+def _groups(starts: list[int], steps: int, segment: int, batch: int) -> list[list[int]]:
+    """Segment indices in runs of at most ``batch`` full segments; a short last one alone."""
+    full = [index for index, start in enumerate(starts) if start + segment <= steps]
+    groups = [full[i : i + batch] for i in range(0, len(full), batch)]
+    return groups + [[index] for index in range(len(full), len(starts))]
 
 
 def _start_state(rollout: Rollout, resets, index: int) -> State:
@@ -204,29 +260,48 @@ def _start_state(rollout: Rollout, resets, index: int) -> State:
     return State.from_arrays(resets, index, rollout.dtype)
 
 
-def _segment(rollout, state, observed, start, segment, scale, positions):
-    """Run one segment from ``state`` at step ``start``: (scaled squared error, end state)."""
-    stop = min(start + segment, observed.shape[0] - 1)
+def _segment(rollout, state, observed, starts, segment, scale, positions):
+    """Run the segments from ``starts`` (a batch of copies, states stacked in ``state``):
+    (their scaled squared error, the stacked end state)."""
+    stop = min(starts[0] + segment, observed.shape[0] - 1)
+    length, copies, N = stop - starts[0], len(starts), observed.shape[1]
+    first = torch.as_tensor(starts)
+    # targets[s]: the observed positions of every copy after its step s + 1, stacked
+    targets = observed[first[None, :] + torch.arange(1, length + 1)[:, None]].reshape(
+        length, copies * N, 3
+    )
     errors = []
 
     def record(s: int, st: State) -> None:
-        step = start + s
-        positions[step] = st.x.detach().numpy()
-        errors.append(((st.x - observed[step]) ** 2).sum())
+        x = st.x.detach().numpy().reshape(copies, N, 3)
+        for copy, start in enumerate(starts):
+            positions[start + s] = x[copy]
+        errors.append(((st.x - targets[s - 1]) ** 2).sum())
 
     try:
-        state = rollout.run(state, stop - start, record)
+        state = rollout.run(state, length, record, batch=copies)
     except torch.linalg.LinAlgError as error:  # an SVD of NaN: the state is already lost
-        step = start + len(errors) + 1
+        step = starts[0] + len(errors) + 1
         raise UnstableSimulation(
             f"the simulation became non-finite at step {step} ({str(error).splitlines()[0]})",
             step,
         ) from None
     loss = torch.stack(errors).sum() * scale
     if not torch.isfinite(loss):
-        bad = next((start + i + 1 for i, e in enumerate(errors) if not torch.isfinite(e)), stop)
+        bad = _first_non_finite(positions, starts, length)
         raise UnstableSimulation(f"the simulation became non-finite at step {bad}", bad)
     return loss, state
+
+
+def _first_non_finite(positions: np.ndarray, starts: list[int], length: int) -> int:
+    """The earliest step whose recorded positions are not finite, over the given segments."""
+    bad = [
+        start + offset
+        for start in starts
+        for offset in range(1, length + 1)
+        if not np.isfinite(positions[start + offset]).all()
+    ]
+    return min(bad, default=starts[0] + length)
 
 
 def _checkpointed(rollout, observed, starts, segment, scale, positions) -> RolloutResult:
@@ -237,19 +312,40 @@ def _checkpointed(rollout, observed, starts, segment, scale, positions) -> Rollo
     with torch.no_grad():
         for start in starts:
             checkpoints.append(state)
-            loss, state = _segment(rollout, state, observed, start, segment, scale, positions)
+            loss, state = _segment(rollout, state, observed, [start], segment, scale, positions)
             total += loss.item()
     carried: tuple[torch.Tensor, ...] | None = None
     for start, checkpoint in zip(reversed(starts), reversed(checkpoints), strict=True):
         leaf = checkpoint.detached(requires_grad=True)
-        loss, end = _segment(rollout, leaf, observed, start, segment, scale, positions)
+        loss, end = _segment(rollout, leaf, observed, [start], segment, scale, positions)
         if carried is not None:
             loss = loss + sum((t * g).sum() for t, g in zip(end.tensors(), carried, strict=True))
         loss.backward()
-        carried = tuple(
-            torch.zeros_like(t) if t.grad is None else t.grad for t in leaf.tensors()
-        )
+        carried = tuple(torch.zeros_like(t) if t.grad is None else t.grad for t in leaf.tensors())
     return RolloutResult(total, positions)
+
+
+def _check_per_particle(law: nn.Module, F: torch.Tensor, name: str) -> None:
+    """A constitutive law maps each particle's F alone: on F made distinct per particle (a
+    fixed 1 % perturbation), the law on the two halves of the batch, and on the batch reversed,
+    must give the same rows (the batched segments rely on it)."""
+    half = F.shape[0] // 2
+    if half < 1:
+        return
+    noise = torch.randn(F.shape, generator=torch.Generator().manual_seed(0), dtype=F.dtype)
+    F = F + 0.01 * noise
+    whole = law(F)
+    split = torch.cat([law(F[:half]), law(F[half:])])
+    reversed_rows = law(F.flip(0)).flip(0)
+    tolerance = 1e-5 * float(whole.abs().max()) + 1e-30
+    for other in (split, reversed_rows):
+        if not torch.allclose(other, whole, rtol=1e-5, atol=tolerance, equal_nan=True):
+            raise LawError(
+                f"the {name} mixes particles: its result for one particle depends on the "
+                "others (a sum, mean or other reduction over the first dimension, or an "
+                "ordering by particle); a constitutive law maps each particle's F on its "
+                "own, so reduce only over the last dimensions (dim=-1 or (-2, -1))"
+            )
 
 
 def _checked(value, law: str, what: str, expected: tuple[int, ...]) -> torch.Tensor:
@@ -257,8 +353,7 @@ def _checked(value, law: str, what: str, expected: tuple[int, ...]) -> torch.Ten
         raise LawError(f"the {law} must return a torch.Tensor ({what}), got {type(value).__name__}")
     if tuple(value.shape) != expected:
         raise LawError(
-            f"the {law} must return {what} of shape {expected} (B, 3, 3), "
-            f"got {tuple(value.shape)}"
+            f"the {law} must return {what} of shape {expected} (B, 3, 3), got {tuple(value.shape)}"
         )
     if not torch.isfinite(value).all():
         raise UnstableSimulation(

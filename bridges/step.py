@@ -45,15 +45,21 @@ class Transfer:
     scene : taichi_mpm.Scene
         Grid, time step, walls, particle mass and volume (its initial state is not used).
     parallel : bool, optional
-        Parallel loops; default as in :class:`taichi_mpm.Simulator`.
+        Parallel loops; default as in :class:`taichi_mpm.Simulator` (by all copies' particles).
+    batch : int
+        Independent copies of the scene stepped at once, each on its own grid: the tensors of a
+        step hold ``batch * N`` particles, copy b in rows ``b * N`` to ``(b + 1) * N - 1``.
     """
 
-    def __init__(self, scene: Scene, parallel: bool | None = None) -> None:
+    def __init__(self, scene: Scene, parallel: bool | None = None, batch: int = 1) -> None:
+        if batch < 1:
+            raise ValueError(f"batch must be at least 1, got {batch}")
         info = runtime.current()
         self.scene = scene
+        self.batch = batch
         self.dtype = torch_dtype()
         if parallel is None:
-            parallel = info.arch != "cpu" or scene.num_particles >= PARALLEL_THRESHOLD
+            parallel = info.arch != "cpu" or batch * scene.num_particles >= PARALLEL_THRESHOLD
         self._serial = not parallel
         n, N = scene.grid_resolution, scene.num_particles
         vec, mat = ti.types.vector(3, info.dtype), ti.types.matrix(3, 3, info.dtype)
@@ -62,12 +68,13 @@ class Transfer:
         def array(element, shape):
             return ti.ndarray(element, shape=shape, needs_grad=True)
 
-        self.x, self.v = array(vec, (2, N)), array(vec, (2, N))
-        self.C, self.F = array(mat, (2, N)), array(mat, (2, N))
-        self.F_corrected, self.stress = array(mat, (1, N)), array(mat, (1, N))
-        self.grid_mass = array(scalar, (1, n, n, n))
-        self.grid_momentum = array(vec, (1, n, n, n))
-        self.grid_velocity = array(vec, (1, n, n, n))
+        slots = 2 * batch  # copy b: input slot 2b, output slot 2b + 1, grid slot 2b
+        self.x, self.v = array(vec, (slots, N)), array(vec, (slots, N))
+        self.C, self.F = array(mat, (slots, N)), array(mat, (slots, N))
+        self.F_corrected, self.stress = array(mat, (slots, N)), array(mat, (slots, N))
+        self.grid_mass = array(scalar, (slots, n, n, n))
+        self.grid_momentum = array(vec, (slots, n, n, n))
+        self.grid_velocity = array(vec, (slots, n, n, n))
         walls = scene.walls
         friction = walls.friction if walls.kind == "separate" else 0.0
         self._settings = (
@@ -79,30 +86,33 @@ class Transfer:
 
     @property
     def num_particles(self) -> int:
-        return self.scene.num_particles
+        """Particles of one step: all copies'."""
+        return self.batch * self.scene.num_particles
 
     def _arrays(self):
         return (self.x, self.v, self.C, self.F, self.F_corrected, self.stress, self.grid_mass,
                 self.grid_momentum, self.grid_velocity)  # fmt: skip
 
     def forward(self, packed: torch.Tensor) -> torch.Tensor:
-        """Packed (N, 24) next state (x, v, C, F_trial) from a packed (N, 33) input."""
+        """Packed (B * N, 24) next state (x, v, C, F_trial) from a packed (B * N, 33) input."""
         out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
         kernels.step_forward(packed, out, *self._arrays(), *self._settings, self._serial)
         return out
 
     def backward(self, packed: torch.Tensor, output_grad: torch.Tensor) -> torch.Tensor:
-        """Packed (N, 33) dL/d(input) of one step from its packed (N, 24) dL/d(output)."""
+        """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 24)
+        dL/d(output)."""
         arrays = self._arrays()
         kernels.recompute_and_seed(packed, output_grad, *arrays, *(a.grad for a in arrays),
                                    *self._settings, self._serial)  # fmt: skip
         sc = self.scene
-        tk.g2p.grad(self.x, self.v, self.C, self.F, self.F_corrected, self.grid_velocity, 0,
-                    sc.dx, sc.dt, self._serial)  # fmt: skip
-        tk.grid_update.grad(self.grid_mass, self.grid_momentum, 0, self.grid_velocity,
-                            *self._grid_settings, self._serial)  # fmt: skip
-        tk.p2g.grad(self.x, self.v, self.C, self.stress, 0, self.grid_mass, self.grid_momentum,
-                    sc.dx, sc.dt, sc.particle_volume, sc.particle_mass, self._serial)  # fmt: skip
+        kernels.g2p.grad(self.x, self.v, self.C, self.F, self.F_corrected, self.grid_velocity,
+                         sc.dx, sc.dt, self._serial)  # fmt: skip
+        kernels.grid_update.grad(self.grid_mass, self.grid_momentum, self.grid_velocity,
+                                 *self._grid_settings, self._serial)  # fmt: skip
+        kernels.p2g.grad(self.x, self.v, self.C, self.stress, self.grid_mass,
+                         self.grid_momentum, sc.dx, sc.dt, sc.particle_volume, sc.particle_mass,
+                         self._serial)  # fmt: skip
         input_grad = packed.new_empty(packed.shape)
         kernels.store_input_gradients(self.x.grad, self.v.grad, self.C.grad,
                                       self.F_corrected.grad, self.stress.grad, input_grad,

@@ -18,7 +18,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
+from bridges.rollout import (
+    Rollout,
+    State,
+    UnstableSimulation,
+    segments_per_batch,
+    trajectory_loss,
+)
 from tasks.constitutive.ground_truth import Trajectory
 
 #: Inner optimizers: ``InnerSettings.optimizer``.
@@ -32,6 +38,9 @@ class InnerSettings:
     ``optimizer="lbfgs"`` uses L-BFGS with a strong-Wolfe line search instead: every epoch is
     one loss-and-gradient evaluation (a line search may take several); ``learning_rate`` and
     ``clip_norm`` are unused (its steps come from the line search).
+
+    The teacher-forced segments of an epoch run as batches of scene copies, as many at a time
+    as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand; at least one).
     """
 
     epochs: int = 30
@@ -39,6 +48,7 @@ class InnerSettings:
     clip_norm: float = 1.0
     reset_every: int = 100
     optimizer: str = "adam"
+    graph_memory_mb: float = 150.0
 
     def __post_init__(self) -> None:
         if self.optimizer not in OPTIMIZERS:
@@ -122,6 +132,7 @@ class _Fit:
         self.result = InnerResult(parameters={name: [] for name in scalar_parameters(law)})
         self.best_state = copy.deepcopy(law.state_dict())
         self.failure = ""  # why the last score was None
+        self.batch = 0  # segments per batch: measured on the first backward epoch
 
     @property
     def epochs_done(self) -> int:
@@ -133,9 +144,12 @@ class _Fit:
         started = time.perf_counter()
         epoch = self.epochs_done
         try:
+            if backward and not self.batch:
+                self.batch = self._segments_per_batch()
             run = trajectory_loss(
                 self.rollout, self.observed.positions, self.observed.states,
                 self.settings.reset_every, backward=backward,
+                batch=self.batch if backward else len(self.observed.states["x"]),
             )  # fmt: skip
         except UnstableSimulation as error:
             self.failure = f"epoch {epoch}: {error}"
@@ -153,6 +167,12 @@ class _Fit:
             self.failure = f"epoch {epoch}: the gradient of {bad} is not finite"
             return None
         return run.loss
+
+    def _segments_per_batch(self) -> int:
+        start = State.from_arrays(self.observed.states, 0, self.rollout.dtype)
+        self.rollout.check_laws(start)  # a law of the wrong shape is reported as such
+        budget = int(self.settings.graph_memory_mb * 2**20)
+        return segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
 
 
 def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> None:

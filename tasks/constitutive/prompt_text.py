@@ -84,6 +84,8 @@ Code rules:
    of order one (for example a modulus as its logarithm, `torch.exp(self.log_E)`).
 4. Every tensor is batched: F is (B, 3, 3). Note the shape after each operation in a comment,
    e.g. `# (B, 3, 3)`, and reshape scalars per particle before broadcasting: `J.view(-1, 1, 1)`.
+   Each particle's result depends on its own F alone: never reduce over the batch dimension
+   (no mean or sum over dim 0), or the law is refused.
 5. Batched helpers: trace `A.diagonal(dim1=-2, dim2=-1).sum(-1)` (not `torch.trace`), transpose
    `A.transpose(-2, -1)`, determinant `torch.linalg.det(A)`, identity
    `torch.eye(3, dtype=F.dtype).expand_as(F)`.

@@ -164,6 +164,13 @@ BROKEN = {
         "the simulation is unstable with this law (epoch 0: the simulation became non-finite",
         "unstable",
     ),
+    "mixes particles": (  # batched segments would couple: refused before any epoch
+        "import torch, torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n"
+        "        return F - F.mean(dim=0, keepdim=True) + torch.eye(3)\n",
+        "the plastic law mixes particles",
+        "invalid",
+    ),
     "raises": (  # singular matrices: only the values tell, so only the fit finds out
         "import torch, torch.nn as nn\nclass Physics(nn.Module):\n"
         "    def forward(self, F):\n        return torch.linalg.inv(F - F)\n",
