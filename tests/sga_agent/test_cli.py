@@ -1,6 +1,7 @@
 """The ``sga-agent`` command line: task listing, evaluation output and exit codes."""
 
 import json
+from importlib import metadata
 from importlib.metadata import EntryPoint
 from pathlib import Path
 
@@ -133,6 +134,19 @@ def test_evaluate_usage_errors_exit_2(tmp_path, monkeypatch, args, fragment):
     result = CliRunner().invoke(main, ["evaluate", *args])
     assert result.exit_code == 2, result.output
     assert fragment in result.output
+
+
+def test_a_task_named_by_its_description_is_suggested(tmp_path):
+    result = CliRunner().invoke(main, ["search", "--task", "sand", "--out", str(tmp_path)])
+    assert result.exit_code == 2, result.output
+    assert "no task named 'sand'" in result.output and "Did you mean 'granular'?" in result.output
+    assert not any(tmp_path.iterdir())
+
+
+def test_version():
+    result = CliRunner().invoke(main, ["--version"])
+    assert result.exit_code == 0
+    assert result.output == f"sga-agent, version {metadata.version('sga-agent')}\n"
 
 
 def test_extract_solution_takes_the_last_python_block():
