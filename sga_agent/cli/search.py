@@ -10,7 +10,7 @@ from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
-from sga_agent.cli.options import registered_task, task_options
+from sga_agent.cli.options import registered_task, task_options, typed_task_options
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
 from sga_agent.proposers.base import ProposerError
@@ -166,6 +166,8 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
             "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
             err=True,
         )
+    task = registry.load_task(settings["task"])
+    settings["task_options"] = typed_task_options(task, settings["task_options"])
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"

@@ -202,3 +202,10 @@ def test_the_fit_refuses_data_that_is_not_a_checked_graph(data, reason):
     result = load_task("plasticine").evaluate(data, EvaluationSettings(epochs=0, options=QUICK))
     assert not result.valid and result.status == "invalid"
     assert reason in result.reason and "\n" not in result.reason
+
+
+def test_a_precision_other_than_the_running_one_is_an_error():
+    """The test session runs Taichi in float64 (tests/conftest.py)."""
+    task = load_task("elastic")
+    with pytest.raises(ValueError, match="precision=float32 differs from the float64 Taichi"):
+        task.evaluate({}, EvaluationSettings(options={"precision": "float32"}))
