@@ -15,11 +15,8 @@ from sga_agent.run_store import RunStore, RunStoreError
 
 @main.command()
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option(
-    "--ray-address",
-    metavar="HOST:PORT",
-    help="Continue a run of --executor ray on this Ray cluster instead of its own.",
-)
+@click.option("--ray-address", metavar="HOST:PORT",
+              help="Continue a run of --executor ray on this Ray cluster instead of its own.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
 def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     """Continue the search recorded in RUN_DIR.

@@ -19,136 +19,64 @@ from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunStore, RunStoreError
 
 
+# fmt: off
 @main.command()
-@click.option(
-    "--task",
-    "task",
-    required=True,
-    callback=registered_task,
-    metavar="NAME",
-    help="Registered task (see `sga-agent tasks`).",
-)
-@click.option(
-    "--model",
-    metavar="PROVIDER/MODEL",
-    envvar="SGA_MODEL",
-    help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
-    "20240620, hosted_vllm/NAME (the key comes from the provider's environment "
-    "variable: OPENAI_API_KEY, ANTHROPIC_API_KEY, ...), or builtin (the task's "
-    "LLM-free proposer: builtin:gp for laws, builtin:ga for molecules). Default: "
-    "builtin.",
-)
+@click.option("--task", "task", required=True, callback=registered_task, metavar="NAME",
+              help="Registered task (see `sga-agent tasks`).")
+@click.option("--model", metavar="PROVIDER/MODEL", envvar="SGA_MODEL",
+              help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
+              "20240620, hosted_vllm/NAME (the key comes from the provider's environment "
+              "variable: OPENAI_API_KEY, ANTHROPIC_API_KEY, ...), or builtin (the task's "
+              "LLM-free proposer: builtin:gp for laws, builtin:ga for molecules). Default: "
+              "builtin.")
 @click.option("--api-base", metavar="URL", help="Base URL of an OpenAI-compatible server.")
-@click.option(
-    "--replay",
-    type=click.Path(exists=True, file_okay=False, path_type=Path),
-    help="Re-run a recorded search: its model answers, no model call.",
-)
-@click.option(
-    "--preset",
-    type=click.Choice(list(PRESETS)),
-    help="Settings of a column of the paper's Table 1, or quick (overridden by the "
-    "options). Default: sga with a model, quick with a built-in proposer.",
-)
+@click.option("--replay", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Re-run a recorded search: its model answers, no model call.")
+@click.option("--preset", type=click.Choice(list(PRESETS)),
+              help="Settings of a column of the paper's Table 1, or quick (overridden by the "
+              "options). Default: sga with a model, quick with a built-in proposer.")
 @click.option("--iterations", type=click.IntRange(min=1), help="Outer iterations.")
 @click.option("--top-k", type=click.IntRange(min=1), help="Solutions shown per prompt (K).")
 @click.option("--exploit", type=click.IntRange(min=0), help="Offspring per iteration at T_l.")
 @click.option("--explore", type=click.IntRange(min=0), help="Offspring per iteration at T_h.")
-@click.option(
-    "--t-exploit",
-    "exploit_temperature",
-    type=click.FloatRange(0, 2),
-    help="Exploit temperature T_l [0.5].",
-)
-@click.option(
-    "--t-explore",
-    "explore_temperature",
-    type=click.FloatRange(0, 2),
-    help="Explore temperature T_h [1.0].",
-)
-@click.option(
-    "--no-bilevel",
-    "no_bilevel",
-    is_flag=True,
-    default=None,
-    help="Do not fit parameters: evaluate the proposed defaults.",
-)
+@click.option("--t-exploit", "exploit_temperature", type=click.FloatRange(0, 2),
+              help="Exploit temperature T_l [0.5].")
+@click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
+              help="Explore temperature T_h [1.0].")
+@click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
+              help="Do not fit parameters: evaluate the proposed defaults.")
 @click.option("--epochs", type=click.IntRange(min=0), help="Inner-optimization epochs.")
-@click.option(
-    "--lr",
-    "learning_rate",
-    type=click.FloatRange(min=0, min_open=True),
-    help="Inner-optimization learning rate.",
-)
-@click.option(
-    "--option",
-    "task_options",
-    multiple=True,
-    callback=task_options,
-    metavar="KEY=VALUE",
-    help="Task option, repeatable (e.g. steps=200).",
-)
-@click.option(
-    "--workers",
-    type=click.IntRange(min=1),
-    default=os.cpu_count() or 1,
-    show_default=True,
-    help="Candidates evaluated at once (one process each).",
-)
-@click.option(
-    "--timeout",
-    "timeout_s",
-    type=click.FloatRange(min=1),
-    default=900.0,
-    show_default=True,
-    help="Wall-clock limit of one evaluation (s).",
-)
-@click.option(
-    "--memory-mb",
-    type=click.IntRange(min=64),
-    default=4096,
-    show_default=True,
-    help="Memory limit of one evaluation (MiB).",
-)
-@click.option(
-    "--executor",
-    type=click.Choice(EXECUTORS),
-    default="local",
-    show_default=True,
-    help="Where candidates are evaluated: this machine's pool of sandboxed worker "
-    "processes, or a Ray cluster (each evaluation a Ray task running the same "
-    f"sandboxed worker on a node; needs `{RAY_INSTALL}`).",
-)
-@click.option(
-    "--ray-address",
-    metavar="HOST:PORT",
-    help="Head node of the Ray cluster (the port of `ray start --head`), or auto "
-    "(RAY_ADDRESS, else a cluster started on this machine). Default: a private "
-    "local Ray instance of --workers CPUs.",
-)
-@click.option(
-    "--ray-cpus",
-    "ray_cpus_per_task",
-    type=click.FloatRange(min=0, min_open=True),
-    help="CPUs each evaluation reserves on its Ray node [1].",
-)
-@click.option(
-    "--ray-memory-mb",
-    type=click.IntRange(min=1),
-    help="Memory each evaluation reserves on its Ray node, MiB [none].",
-)
+@click.option("--lr", "learning_rate", type=click.FloatRange(min=0, min_open=True),
+              help="Inner-optimization learning rate.")
+@click.option("--option", "task_options", multiple=True, callback=task_options,
+              metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200); unknown keys "
+              "and bad values are usage errors.")
+@click.option("--workers", type=click.IntRange(min=1), default=os.cpu_count() or 1,
+              show_default=True, help="Candidates evaluated at once (one process each).")
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=1), default=900.0,
+              show_default=True, help="Wall-clock limit of one evaluation (s).")
+@click.option("--memory-mb", type=click.IntRange(min=64), default=4096, show_default=True,
+              help="Memory limit of one evaluation (MiB).")
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
+              help="Where candidates are evaluated: this machine's pool of sandboxed worker "
+              "processes, or a Ray cluster (each evaluation a Ray task running the same "
+              f"sandboxed worker on a node; needs `{RAY_INSTALL}`).")
+@click.option("--ray-address", metavar="HOST:PORT",
+              help="Head node of the Ray cluster (the port of `ray start --head`), or auto "
+              "(RAY_ADDRESS, else a cluster started on this machine). Default: a private "
+              "local Ray instance of --workers CPUs.")
+@click.option("--ray-cpus", "ray_cpus_per_task", type=click.FloatRange(min=0, min_open=True),
+              help="CPUs each evaluation reserves on its Ray node [1].")
+@click.option("--ray-memory-mb", type=click.IntRange(min=1),
+              help="Memory each evaluation reserves on its Ray node, MiB [none].")
 @click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the run.")
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=Path("runs"),
-    show_default=True,
-    help="Parent folder of the run folder.",
-)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"),
+              show_default=True, help="Parent folder of the run folder.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
+# fmt: on
 def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings) -> None:
     """Search TASK's solutions with a model and differentiable simulation.
 
