@@ -15,11 +15,10 @@ a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``paper`` is the SGA paper's sc
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from pathlib import Path
 
+import click
 import numpy as np
 
 from taichi_mpm.sysid.families import (
@@ -55,157 +54,160 @@ def observed_steps(steps: int, frames: int) -> np.ndarray:
     return np.unique(np.rint(np.linspace(steps / frames, steps, frames)).astype(np.int64))
 
 
-def _positive_fraction(text: str) -> float:
-    value = float(text)
-    if not 0.0 < value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text} must lie in (0, 1]")
-    return value
+def _families_help() -> str:
+    lines = [f"  {name:<11} {text}; defaults {DEFAULTS[name]}" for name, text in FAMILIES.items()]
+    return "Material families:\n\n\b\n" + "\n".join(lines)
 
 
-def _non_negative(text: str) -> float:
-    value = float(text)
-    if not (np.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"{text} must be a finite number >= 0")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text} must be >= 1")
-    return value
-
-
-def parse_args(argv=None) -> argparse.Namespace:
-    families = "\n".join(
-        f"  {name:<11} {text}; defaults {DEFAULTS[name]}" for name, text in FAMILIES.items()
-    )
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0],
-        epilog="material families:\n" + families,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("out", type=Path, help="observation file to write (.npz)")
-    parser.add_argument(
-        "--material", required=True, choices=tuple(FAMILIES), help="material family"
-    )
-    parser.add_argument(
-        "--param",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a hidden parameter value, e.g. --param E=5e4 --param nu=0.3 (repeatable); "
-        "the others take the family's defaults",
-    )
-    parser.add_argument(
-        "--noise",
-        type=_non_negative,
-        default=0.0,
-        help="standard deviation of the Gaussian position noise, as a fraction of the "
-        "body size (default 0: exact positions)",
-    )
-    parser.add_argument(
-        "--frames", type=_positive_int, default=15, help="observed frames after t=0 (default 15)"
-    )
-    parser.add_argument(
-        "--steps",
-        type=_positive_int,
-        default=None,
-        help="time steps simulated (default: 150 for thrown, 1000 for paper)",
-    )
-    parser.add_argument(
-        "--subset",
-        type=_positive_fraction,
-        default=1.0,
-        help="fraction of the particles observed, drawn at random (default 1: all)",
-    )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the subset")
-    parser.add_argument("--scene", choices=SCENES, default="thrown", help="scene (default thrown)")
-    parser.add_argument(
-        "--precision",
-        choices=("float32", "float64"),
-        default="float64",
-        help="precision of the simulation (default float64)",
-    )
-    parser.add_argument(
-        "--arch", choices=("cpu", "cuda", "vulkan", "gpu"), default="cpu", help="Taichi backend"
-    )
-    args = parser.parse_args(argv)
-
+@click.command(
+    help=__doc__.split("\n\n")[0]
+    + "\n\nOUT is the observation file to write (.npz).\n\n"
+    + _families_help(),
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+@click.argument("out", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--material",
+    "family",
+    required=True,
+    type=click.Choice(tuple(FAMILIES)),
+    help="Material family.",
+)
+@click.option(
+    "--param",
+    "assignments",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="A hidden parameter value, e.g. --param E=5e4 --param nu=0.3 (repeatable); "
+    "the others take the family's defaults.",
+)
+@click.option(
+    "--noise",
+    type=click.FloatRange(min=0),
+    default=0.0,
+    show_default=True,
+    help="Standard deviation of the Gaussian position noise, as a fraction of the "
+    "body size (0: exact positions).",
+)
+@click.option(
+    "--frames",
+    type=click.IntRange(min=2),
+    default=15,
+    show_default=True,
+    help="Observed frames after t=0.",
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(min=1),
+    help="Time steps simulated [default: 150 for thrown, 1000 for paper].",
+)
+@click.option(
+    "--subset",
+    type=click.FloatRange(0, 1, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Fraction of the particles observed, drawn at random.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the noise and the subset."
+)
+@click.option(
+    "--scene",
+    "scene_name",
+    type=click.Choice(SCENES),
+    default="thrown",
+    show_default=True,
+    help="Scene.",
+)
+@click.option(
+    "--precision",
+    type=click.Choice(("float32", "float64")),
+    default="float64",
+    show_default=True,
+    help="Precision of the simulation.",
+)
+@click.option(
+    "--arch",
+    type=click.Choice(("cpu", "cuda", "vulkan", "gpu")),
+    default="cpu",
+    show_default=True,
+    help="Taichi backend.",
+)
+def main(
+    out: Path,
+    family: str,
+    assignments: tuple[str, ...],
+    noise: float,
+    frames: int,
+    steps: int | None,
+    subset: float,
+    seed: int,
+    scene_name: str,
+    precision: str,
+    arch: str,
+) -> None:
+    """Simulate, sample frames and particles, add noise, write the observation."""
     params = {}
-    for text in args.param:
+    for text in assignments:
         try:
             name, value = parse_assignment(text)
         except ValueError as error:
-            parser.error(f"--param: {error}")
+            raise click.BadParameter(str(error), param_hint="'--param'") from None
         params[name] = value
     try:
-        args.material_obj = material_family(args.material, **params)
+        material = material_family(family, **params)
     except (FamilyError, ValueError) as error:
-        parser.error(f"--param: {error}")
-    args.params = params
-    if args.steps is None:
-        args.steps = DEFAULT_STEPS[args.scene]
-    if args.frames < 2:
-        parser.error("--frames must be >= 2 (a fit needs at least two frames after t=0)")
-    if args.frames > args.steps:
-        parser.error(f"--frames {args.frames} exceeds --steps {args.steps}")
-    if args.out.suffix != ".npz":
-        parser.error(f"{args.out} must end in .npz")
-    if args.out.is_dir():
-        parser.error(f"{args.out} is a directory; give a file name")
-    return args
-
-
-def main(argv=None) -> int:
-    args = parse_args(argv)
+        raise click.BadParameter(str(error), param_hint="'--param'") from None
+    if not np.isfinite(noise):
+        raise click.BadParameter(f"{noise} is not a finite number", param_hint="'--noise'")
+    steps = DEFAULT_STEPS[scene_name] if steps is None else steps
+    if frames > steps:
+        raise click.BadParameter(f"{frames} exceeds --steps {steps}", param_hint="'--frames'")
+    if out.suffix != ".npz":
+        raise click.BadParameter(f"{out} must end in .npz", param_hint="'OUT'")
 
     import taichi_mpm as tm
     from taichi_mpm.sysid import observation_from_times, save_observation
 
-    material = args.material_obj
-    scene = make_scene(args.scene, args.steps)
-    steps = observed_steps(args.steps, args.frames)
-    rng = np.random.default_rng(args.seed)
+    scene = make_scene(scene_name, steps)
+    frame_steps = observed_steps(steps, frames)
+    rng = np.random.default_rng(seed)
 
     start = time.perf_counter()
-    tm.init(arch=args.arch, precision=args.precision)
-    positions = tm.Simulator(scene, material).forward(steps)
+    tm.init(arch=arch, precision=precision)
+    positions = tm.Simulator(scene, material).forward(frame_steps)
     seconds = time.perf_counter() - start
     if not np.isfinite(positions).all():
-        print(
-            "error: the simulation diverged (NaN or inf positions); use a softer material, "
-            "fewer steps or --precision float64",
-            file=sys.stderr,
+        raise click.ClickException(
+            "the simulation diverged (NaN or inf positions); use a softer material, "
+            "fewer steps or --precision float64"
         )
-        return 1
 
     count = scene.num_particles
-    observed = max(1, int(round(args.subset * count)))
+    observed = max(1, int(round(subset * count)))
     indices = np.arange(count) if observed == count else np.sort(rng.choice(count, observed, False))
     positions = positions[:, indices]
     body_size = float(np.ptp(scene.positions, axis=0).max())
-    if args.noise > 0:
-        positions = positions + args.noise * body_size * rng.standard_normal(positions.shape)
+    if noise > 0:
+        positions = positions + noise * body_size * rng.standard_normal(positions.shape)
 
-    observation = observation_from_times(scene, positions, steps * scene.dt, indices)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_observation(args.out, observation)
+    observation = observation_from_times(scene, positions, frame_steps * scene.dt, indices)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_observation(out, observation)
 
     hidden = material.parameters()
-    print(f"material family: {args.material} ({FAMILIES[args.material]})")
-    print("hidden parameters: " + ", ".join(f"{k}={v:g}" for k, v in hidden.items()))
-    print(
-        f"scene: {args.scene}, {count} particles, grid {scene.grid_resolution}^3, "
-        f"dt={scene.dt:g} s, {args.steps} steps ({args.precision}, simulated in {seconds:.1f} s)"
+    click.echo(f"material family: {family} ({FAMILIES[family]})")
+    click.echo("hidden parameters: " + ", ".join(f"{k}={v:g}" for k, v in hidden.items()))
+    click.echo(
+        f"scene: {scene_name}, {count} particles, grid {scene.grid_resolution}^3, "
+        f"dt={scene.dt:g} s, {steps} steps ({precision}, simulated in {seconds:.1f} s)"
     )
-    print(
-        f"wrote {args.out}: {len(steps)} frames at t = {steps[0] * scene.dt:g} .. "
-        f"{steps[-1] * scene.dt:g} s, {len(indices)} of {count} particles, "
-        f"noise {args.noise:g} x body size {body_size:g} m (seed {args.seed})"
+    click.echo(
+        f"wrote {out}: {len(frame_steps)} frames at t = {frame_steps[0] * scene.dt:g} .. "
+        f"{frame_steps[-1] * scene.dt:g} s, {len(indices)} of {count} particles, "
+        f"noise {noise:g} x body size {body_size:g} m (seed {seed})"
     )
-    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

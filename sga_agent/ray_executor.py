@@ -42,7 +42,7 @@ from sga_agent.sandbox import SandboxLimits, _settings_json, evaluate_in_sandbox
 from sga_agent.task import Evaluation, EvaluationSettings
 
 #: How to install the optional dependency.
-RAY_INSTALL = 'pip install "sga[ray]"'
+RAY_INSTALL = 'pip install "sga-agent[ray]"'
 #: Retries of a task whose Ray worker or node died (failures of the candidate are not retried).
 TASK_RETRIES = 1
 #: Seconds to wait for a TCP connection to the head node before giving up on it.

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import re
 from importlib.metadata import EntryPoint, entry_points
 
 from sga_agent.task import Task
@@ -45,7 +46,7 @@ def entry_point(name: str) -> EntryPoint:
     """
     points = task_entry_points()
     if name not in points:
-        close = difflib.get_close_matches(name, points, n=1)
+        close = difflib.get_close_matches(name, points, n=1) or _described_as(name, points)
         hint = f" Did you mean {close[0]!r}?" if close else ""
         known = ", ".join(sorted(points)) or "none"
         raise UnknownTaskError(
@@ -53,6 +54,25 @@ def entry_point(name: str) -> EntryPoint:
             f"Tasks register through the {GROUP!r} entry-point group; see `sga-agent tasks`."
         )
     return points[name]
+
+
+def _described_as(word: str, points: dict[str, EntryPoint]) -> list[str]:
+    """The one task whose description holds ``word`` ("sand": granular), if exactly one does.
+
+    Loads the tasks to read their descriptions; a task that fails to load is passed over.
+    """
+    if not word.isalpha():
+        return []
+    pattern = re.compile(rf"\b{re.escape(word)}\b", re.IGNORECASE)
+    found = []
+    for name, point in sorted(points.items()):
+        try:
+            description = point.load()().description
+        except Exception:  # a plugin may fail to import in any way
+            continue
+        if pattern.search(description):
+            found.append(name)
+    return found if len(found) == 1 else []
 
 
 def load_task(name: str) -> Task:

@@ -113,6 +113,14 @@ class Search:
     # ------------------------------------------------------------------ the loop
 
     def run(self) -> SearchResult:
+        """Run to the end or to a budget.
+
+        Raises
+        ------
+        ProposerError
+            The proposer failed in a way that asking again cannot fix (no API key, nothing at
+            the address, an unknown model); the run stays resumable, without a summary.
+        """
         self._emit({"type": "search_started", "resumed": bool(self._evaluations)})
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
@@ -197,7 +205,11 @@ class Search:
                 return [Proposal(text, proposer.name, temperature) for text in texts[:n]]
             return list(proposer.propose(messages, temperature, n))[:n]
         except ProposerError as error:
-            self._emit({"type": "proposer_error", "error": str(error)})
+            self._emit(
+                {"type": "proposer_error", "error": str(error), "transient": error.transient}
+            )
+            if not error.transient:
+                raise
             return []
 
     def _extract(self, proposal: dict[str, Any]) -> tuple[str, Evaluation | None]:

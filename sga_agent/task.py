@@ -44,7 +44,7 @@ class EvaluationSettings:
     seed : int
         Seed for any randomness of the evaluation.
     options : dict
-        Task-specific settings (each task documents its own keys).
+        Task-specific settings: fields of the task's ``options_type`` (see :class:`Task`).
     """
 
     epochs: int | None = None
@@ -152,12 +152,28 @@ class PromptParts:
     requirements: str
 
 
+@dataclass(frozen=True)
+class NoOptions:
+    """The options of a task that declares none."""
+
+
+def options_type(task: object) -> type:
+    """The dataclass of ``task``'s options: its ``options_type``, else :class:`NoOptions`."""
+    return getattr(task, "options_type", NoOptions)
+
+
 @runtime_checkable
 class Task(Protocol):
     """A scientific problem the search can work on.
 
     ``kind`` is ``"equation"`` (code with continuous parameters fitted by the inner loop) or
     ``"entity"`` (a structure, such as a molecule, whose continuous part is optimized).
+
+    A task with options declares them as a class attribute ``options_type``: a dataclass whose
+    fields (with defaults) are the options, typed ``int``, ``float``, ``bool``, ``str`` or a
+    ``Literal`` of strings (optionally ``| None``), and whose ``__post_init__`` raises
+    ``ValueError`` for a bad value. ``--option KEY=VALUE`` is checked against it before
+    anything runs; ``EvaluationSettings.options`` then holds the given options, typed.
     """
 
     name: str

@@ -4,6 +4,7 @@ Imports taichi and numpy only. Call :func:`init` once, build a :class:`Scene` an
 :class:`Material`, then run a :class:`Simulator` forward and, for gradients, backward.
 """
 
+from taichi_mpm import _banner  # noqa: F401 (before Taichi is imported)
 from taichi_mpm.materials import (
     PARAMETER_NAMES,
     DruckerPrager,

@@ -13,9 +13,10 @@ from typing import Any
 
 import click
 
+from sga_agent import registry
 from sga_agent.benchmark import chart, table
 from sga_agent.benchmark.grid import GridError, Method, plan_cells, run_cells
-from sga_agent.cli.options import task_options
+from sga_agent.cli.options import task_options, typed_task_options
 from sga_agent.config import SearchConfig
 
 #: SearchConfig fields the grid or its own options set, not ``--set``.
@@ -142,7 +143,8 @@ def run_benchmark(
     parallel: int | None,
 ) -> None:
     """Plan and run the grid, then write and print its table; exit 1 if a cell failed."""
-    shared = {**settings, "task_options": task_options, "epochs": epochs,
+    typed = _typed_options(tasks, task_options)
+    shared = {**settings, "task_options": typed, "epochs": epochs,
               "api_base": api_base, "workers": workers}  # fmt: skip
     try:
         cells = plan_cells(tasks, methods, seeds, out, shared)
@@ -162,3 +164,21 @@ def run_benchmark(
         click.echo(f"{len(failures)} cells failed; run the same command again to resume them",
                    err=True)  # fmt: skip
         sys.exit(1)
+
+
+def _typed_options(tasks: Sequence[str], raw: dict[str, str]) -> dict[str, Any]:
+    """The shared ``--option`` values, checked against every task's options; a usage error
+    when a task lacks one or they mean different things to two tasks."""
+    if not raw:
+        return {}
+    typed: dict[str, Any] | None = None
+    for name in tasks:
+        try:
+            task = registry.load_task(name)
+        except registry.UnknownTaskError as error:
+            raise click.UsageError(str(error)) from error
+        options = typed_task_options(task, raw)
+        if typed is not None and options != typed:
+            raise click.UsageError(f"--option values mean different things to the tasks: {raw}")
+        typed = options
+    return typed or {}

@@ -10,6 +10,7 @@ import click
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="sga-agent", prog_name="sga-agent")
 def main() -> None:
     """sga-agent: LLM-driven bilevel search for physics code and molecules.
 

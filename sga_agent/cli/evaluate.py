@@ -17,10 +17,10 @@ from rich.text import Text
 
 from sga_agent import registry
 from sga_agent.cli import main
-from sga_agent.cli.options import task_options, task_or_factory
+from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
 from sga_agent.parsing import CodeRejected, check_code
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
-from sga_agent.task import Evaluation, EvaluationSettings
+from sga_agent.task import Evaluation, EvaluationSettings, Task
 
 _FENCED_PYTHON = re.compile(r"```python[^\n]*\n(.*?)```", re.DOTALL)
 _DEFAULTS = SandboxLimits()
@@ -60,7 +60,8 @@ def extract_solution(text: str) -> str:
     multiple=True,
     callback=task_options,
     metavar="KEY=VALUE",
-    help="Task option, repeatable (e.g. steps=200, optimizer=lbfgs for the constitutive tasks).",
+    help="Task option, repeatable (e.g. steps=200, optimizer=lbfgs for the constitutive tasks); "
+    "unknown keys and bad values are usage errors.",
 )
 @click.option(
     "--json",
@@ -105,12 +106,14 @@ def evaluate(
         text = file.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise click.BadParameter(f"cannot read '{file}': {error}", param_hint="'FILE'") from error
-    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
-    settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=options)
     extra_path = [Path.cwd()] if ":" in task_name else []
+    task = _task(task_name, extra_path)
+    typed = typed_task_options(task, options)
+    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
+    settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=typed)
     solution = extract_solution(text)
     try:
-        check_code(solution, _kind(task_name, extra_path))
+        check_code(solution, task.kind)
     except CodeRejected as error:
         evaluation = Evaluation.invalid(f"the code breaks the rules: {error}")
     else:
@@ -126,11 +129,11 @@ def evaluate(
         sys.exit(1)
 
 
-def _kind(task_name: str, extra_path: list[Path]) -> str:
-    """The task's kind, for the static checks (a factory's module is imported from here)."""
+def _task(task_name: str, extra_path: list[Path]) -> Task:
+    """The task, for its kind and options (a factory's module is imported from here)."""
     sys.path[:0] = [str(path) for path in extra_path]
     try:
-        return registry.resolve_task(task_name).kind
+        return registry.resolve_task(task_name)
     finally:
         del sys.path[: len(extra_path)]
 

@@ -8,41 +8,41 @@ from typing import Any
 import click
 
 from sga_agent import registry
+from sga_agent.options import OptionError, parse_options
+from sga_agent.task import Task, options_type
 
 
-def option_value(raw: str) -> int | float | str:
-    """A task option's value from its text: an int, else a float, else the text."""
-    for convert in (int, float):
-        try:
-            return convert(raw)
-        except ValueError:
-            continue
-    return raw
-
-
-def key_value_options(items: Iterable[str]) -> dict[str, Any]:
-    """Task options from ``KEY=VALUE`` items (see :func:`option_value`).
+def key_value_options(items: Iterable[str]) -> dict[str, str]:
+    """``KEY=VALUE`` items as a dict of texts (typed later, against the task's options).
 
     Raises
     ------
     ValueError
         An item is not ``KEY=VALUE``.
     """
-    options: dict[str, Any] = {}
+    options: dict[str, str] = {}
     for item in items:
         key, sep, raw = item.partition("=")
         if not sep or not key:
             raise ValueError(f"{item!r} is not KEY=VALUE (e.g. steps=200)")
-        options[key] = option_value(raw)
+        options[key] = raw
     return options
 
 
 def task_options(ctx: click.Context, param: click.Parameter, items: tuple[str, ...]):
-    """Click callback: repeated ``--option KEY=VALUE`` as a dict of task options."""
+    """Click callback: repeated ``--option KEY=VALUE`` as a dict of texts."""
     try:
         return key_value_options(items)
     except ValueError as error:
         raise click.BadParameter(str(error), ctx, param) from None
+
+
+def typed_task_options(task: Task, raw: dict[str, str]) -> dict[str, Any]:
+    """``raw`` checked against the task's options dataclass and typed; a usage error if not."""
+    try:
+        return parse_options(options_type(task), raw, task.name)
+    except OptionError as error:
+        raise click.BadParameter(str(error), param_hint="'--option'") from None
 
 
 def registered_task(ctx: click.Context, param: click.Parameter, name: str) -> str:

@@ -10,13 +10,16 @@ from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
-from sga_agent.cli.options import registered_task, task_options
+from sga_agent.cli.options import registered_task, task_options, typed_task_options
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
+from sga_agent.proposers.base import ProposerError
+from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunStore, RunStoreError
 
 
+# fmt: off
 @main.command()
 @click.option("--task", "task", required=True, callback=registered_task, metavar="NAME",
               help="Registered task (see `sga-agent tasks`).")
@@ -46,7 +49,8 @@ from sga_agent.run_store import RunStore, RunStoreError
 @click.option("--lr", "learning_rate", type=click.FloatRange(min=0, min_open=True),
               help="Inner-optimization learning rate.")
 @click.option("--option", "task_options", multiple=True, callback=task_options,
-              metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200).")
+              metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200); unknown keys "
+              "and bad values are usage errors.")
 @click.option("--workers", type=click.IntRange(min=1), default=os.cpu_count() or 1,
               show_default=True, help="Candidates evaluated at once (one process each).")
 @click.option("--timeout", "timeout_s", type=click.FloatRange(min=1), default=900.0,
@@ -72,6 +76,7 @@ from sga_agent.run_store import RunStore, RunStoreError
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"),
               show_default=True, help="Parent folder of the run folder.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
+# fmt: on
 def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings) -> None:
     """Search TASK's solutions with a model and differentiable simulation.
 
@@ -89,6 +94,8 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
             "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
             err=True,
         )
+    task = registry.load_task(settings["task"])
+    settings["task_options"] = typed_task_options(task, settings["task_options"])
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
@@ -118,11 +125,17 @@ def check_executor(config: SearchConfig) -> None:
 
 
 def make_proposer(config: SearchConfig):
-    """The run's proposer; a bad choice is a usage error."""
+    """The run's proposer; a bad choice is a usage error, a missing API key an error."""
     try:
-        return runner.make_proposer(config, registry.load_task(config.task))
+        proposer = runner.make_proposer(config, registry.load_task(config.task))
     except ValueError as error:  # unknown built-in, malformed model string
         raise click.UsageError(str(error)) from error
+    if isinstance(proposer, LiteLLMProposer):
+        try:
+            proposer.check_keys()
+        except ProposerError as error:
+            raise click.ClickException(str(error)) from error
+    return proposer
 
 
 def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> None:
@@ -133,7 +146,7 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
     try:
         with SearchProgress(console, config) as progress:
             result = runner.run(config, store, progress, proposer)
-    except RayUnavailableError as error:  # e.g. no cluster at --ray-address
+    except (RayUnavailableError, ProposerError) as error:  # no cluster, no model: stop
         resume = f"`sga-agent resume {store.path}` continues the run"
         raise click.ClickException(f"{error}\n{resume}") from error
     print_result(console, store, result, as_json)

@@ -55,8 +55,15 @@ class Proposal:
 class ProposerError(RuntimeError):
     """The model could not be asked (after retries); the message names the cause and the fix.
 
+    ``transient`` is True when a later request may well succeed (rate limits, timeouts, server
+    errors that outlasted the retries); otherwise (no key, a refused key, an unknown model,
+    nothing listening at the address) asking again is pointless and the search stops.
     Messages never contain API keys: proposers redact them before raising.
     """
+
+    def __init__(self, message: str, transient: bool = False) -> None:
+        super().__init__(message)
+        self.transient = transient
 
 
 @runtime_checkable

@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import random
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -219,7 +220,10 @@ class LiteLLMProposer:
                 except ProposerError as error:
                     errors.append(error)
         if errors and not proposals and required:
-            raise ProposerError(f"all {count} requests failed; the first: {errors[0]}")
+            raise ProposerError(
+                f"all {count} requests failed; the first: {errors[0]}",
+                transient=all(error.transient for error in errors),
+            )
         if errors:
             log.warning("%d of %d requests failed; the first: %s", len(errors), count, errors[0])
         return proposals
@@ -255,7 +259,8 @@ class LiteLLMProposer:
                     raise ProposerError(message) from None
                 if attempt + 1 == attempts:
                     raise ProposerError(
-                        f"gave up on {settings.model} after {attempts} attempts: {message}"
+                        f"gave up on {settings.model} after {attempts} attempts: {message}",
+                        transient=True,
                     ) from None
                 wait = backoff_wait(attempt, settings.backoff_s)
                 log.warning(
@@ -278,12 +283,16 @@ class LiteLLMProposer:
                 f"{model} did not answer within timeout_s={self.settings.timeout_s:g} s "
                 f"(raise timeout_s, or check the server): {text}"
             )
-        missing = self._missing_keys()
+        missing = self._missing_key_message()
         if missing:
-            hint = ""
-            if self.settings.api_base is not None:
-                hint = " (any value does for a local server that ignores keys)"
-            return False, f"no API key for {model}: set {' or '.join(missing)}{hint}. {text}"
+            return False, f"{missing}. {text}"
+        unreachable = _unreachable(error)
+        if unreachable:
+            if self.settings.api_base is None:
+                where, fix = f"the {self.settings.provider} API", "check the network connection"
+            else:
+                where, fix = self.settings.api_base, "start the server or correct --api-base"
+            return False, f"cannot reach {where} for {model} ({unreachable}): {fix}"
         status = getattr(error, "status_code", None)
         if isinstance(error, lm.AuthenticationError) or status in AUTH_STATUSES:
             return False, (
@@ -305,12 +314,26 @@ class LiteLLMProposer:
             return False, f"{model} was not found: check the model name and api_base. {text}"
         return False, f"{model} rejected the request: {text}"
 
-    def _missing_keys(self) -> list[str]:
-        """API-key variables litellm expects for this model but cannot find in the environment."""
+    def check_keys(self) -> None:
+        """Raise :class:`ProposerError` naming the variable to set when an API key is missing
+        (no request is sent)."""
+        missing = self._missing_key_message()
+        if missing:
+            raise ProposerError(missing)
+
+    def _missing_key_message(self) -> str:
+        """Which API-key variable to set, when litellm expects one for this model that the
+        environment lacks; empty otherwise."""
         report = self._litellm.validate_environment(
             model=self.settings.model, api_base=self.settings.api_base
         )
-        return [name for name in report.get("missing_keys", []) if name.endswith("_API_KEY")]
+        missing = [name for name in report.get("missing_keys", []) if name.endswith("_API_KEY")]
+        if not missing:
+            return ""
+        hint = ""
+        if self.settings.api_base is not None:
+            hint = " (any value does for a local server that ignores keys)"
+        return f"no API key for {self.settings.model}: set {' or '.join(missing)}{hint}"
 
     def _proposals(self, response: Any, temperature: float, seconds: float) -> list[Proposal]:
         """One proposal per choice, sharing the response's tokens and cost among them."""
@@ -351,6 +374,21 @@ def _check_provider(provider: str, litellm: ModuleType) -> None:
         raise BackboneSettingsError(
             f"unknown provider {provider!r} in the model string.{hint} Examples: {MODEL_EXAMPLES}"
         )
+
+
+def _unreachable(error: BaseException) -> str:
+    """Why no connection could be made, if that is what ``error`` (or its cause) says: nothing
+    listens at the address, or its host name does not resolve. Empty otherwise."""
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, ConnectionRefusedError):
+            return "connection refused"
+        if isinstance(cause, socket.gaierror):
+            return f"host name not resolved: {cause.strerror or cause}"
+        cause = cause.__cause__ or cause.__context__
+    return ""
 
 
 def _shares(total: int, parts: int) -> list[int]:

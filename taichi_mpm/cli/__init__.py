@@ -10,6 +10,8 @@ from rich.console import Console
 
 import taichi_mpm as tm
 
+#: The distribution that installs this command (its version is ``--version``'s).
+DISTRIBUTION = "sga-agent"
 ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 PRECISIONS = ("float32", "float64")
 
@@ -37,6 +39,7 @@ def start_taichi(console: Console, arch: str, precision: str) -> str:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name=DISTRIBUTION, prog_name="taichi-mpm")
 def main() -> None:
     """taichi-mpm: a differentiable 3D MLS-MPM simulator in Taichi.
 

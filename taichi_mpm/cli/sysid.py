@@ -57,7 +57,7 @@ def _json_ready(value):
 
 
 @main.command(help=_SYSID_HELP)
-@click.argument("observed", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("observed", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
     "--material",
     "family",

@@ -25,6 +25,7 @@ from tasks.constitutive.ground_truth import Trajectory, load_or_generate
 from tasks.constitutive.inner import InnerSettings, NoFiniteEpoch, optimize
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
+from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import KNOWN_ELASTIC, ConstitutiveSpec
 
 
@@ -34,6 +35,19 @@ def ensure_runtime(precision: str) -> None:
         runtime.current()
     except runtime.RuntimeNotInitialized:
         tm.init(arch="cpu", precision=precision)
+
+
+def check_precision(precision: str | None) -> None:
+    """``ValueError`` when Taichi runs in this process in a precision other than ``precision``."""
+    try:
+        running = runtime.current().precision
+    except runtime.RuntimeNotInitialized:
+        return
+    if precision not in (None, running):
+        raise ValueError(
+            f"option precision={precision} differs from the {running} Taichi running in this "
+            "process; leave the option out or evaluate in a fresh process"
+        )
 
 
 def ground_truth(spec: ConstitutiveSpec, steps: int | None = None) -> Trajectory:
@@ -51,19 +65,20 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
 def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) -> Evaluation:
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
-    Invalid results carry a reason. ``settings.options`` may hold ``precision`` ("float32"
-    default, "float64"), ``steps`` (a shorter scene, for quick checks) and ``optimizer``
-    ("adam" default, "lbfgs"). The artifact ``trajectory`` holds the best epoch's positions
-    (see :mod:`tasks.constitutive.artifacts`).
+    Invalid results carry a reason. ``settings.options`` holds fields of
+    :class:`~tasks.constitutive.options.ConstitutiveOptions`. The artifact ``trajectory`` holds
+    the best epoch's positions (see :mod:`tasks.constitutive.artifacts`).
     """
     started = time.perf_counter()
-    ensure_runtime(settings.options.get("precision", "float32"))
+    options = ConstitutiveOptions(**settings.options)
+    check_precision(options.precision)
+    ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()
     try:
         law = build_law(data.get("law") if isinstance(data, dict) else None, dtype)
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
-    observed = ground_truth(spec, settings.options.get("steps"))
+    observed = ground_truth(spec, options.steps)
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
     if spec.searched == "elastic":
         rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
@@ -73,7 +88,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         epochs=spec.epochs if settings.epochs is None else settings.epochs,
         learning_rate=settings.learning_rate or spec.learning_rate,
         reset_every=spec.reset_every,
-        optimizer=settings.options.get("optimizer", spec.optimizer),
+        optimizer=options.optimizer or spec.optimizer,
     )
     try:
         result = optimize(rollout, law, observed, inner)

@@ -68,7 +68,23 @@ def optimization_text(result: InnerResult, settings: InnerSettings) -> str:
         )
     if result.stopped:
         lines.append(f"The optimization stopped early at {result.stopped}.")
+    if result.unused:
+        lines.append(unused_text(result.unused))
     return "\n".join(lines)
+
+
+def unused_text(names: list[str]) -> str:
+    """One sentence naming the parameters the loss does not depend on."""
+    listed = ", ".join(names)
+    if len(names) == 1:
+        return (
+            f"The loss does not depend on the parameter {listed} (no gradient reaches it from "
+            "the law's output), so it was not fitted: use it in forward or remove it."
+        )
+    return (
+        f"The loss does not depend on the parameters {listed} (no gradient reaches them from "
+        "the law's output), so they were not fitted: use them in forward or remove them."
+    )
 
 
 def _optimizer(settings: InnerSettings) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from bridges.linalg import stable_linalg
 from bridges.rollout import (
     Rollout,
     State,
@@ -68,6 +69,7 @@ class InnerResult:
     positions: np.ndarray | None = None  # predicted positions at the best epoch
     seconds: list[float] = field(default_factory=list)  # wall time of each epoch
     stopped: str = ""  # why the optimization ended early ("" when it ran every epoch)
+    unused: list[str] = field(default_factory=list)  # parameters the law's output ignores
     rejected_trials: list[str] = field(default_factory=list)  # L-BFGS trial points that failed
 
     @property
@@ -100,15 +102,21 @@ def optimize(
 
     Adam takes ``settings.epochs`` gradient steps and the parameters after the last one are
     scored too; L-BFGS gets ``settings.epochs + 1`` evaluations. A law without trainable
-    parameters is scored once.
+    parameters is scored once. Parameters the law's output does not depend on are frozen
+    (not fitted) and named in ``unused`` (see :func:`unused_parameters`).
 
     Raises
     ------
     NoFiniteEpoch
         The starting parameters already make the simulation non-finite.
     """
+    unused = unused_parameters(law)
+    for name, parameter in law.named_parameters():
+        if name in unused:
+            parameter.requires_grad_(False)  # no gradient can reach it
     trainable = [p for p in law.parameters() if p.requires_grad]
     fit = _Fit(rollout, law, observed, settings)
+    fit.result.unused = unused
     if not trainable or settings.epochs == 0:
         if fit.score(backward=False) is None:
             fit.result.stopped = fit.failure
@@ -120,6 +128,28 @@ def optimize(
         raise NoFiniteEpoch(fit.result.stopped or "no epoch gave a finite loss")
     law.load_state_dict(fit.best_state)
     return fit.result
+
+
+def unused_parameters(law: nn.Module) -> list[str]:
+    """Names of the trainable parameters no gradient of the law's output reaches (never used
+    in ``forward``, or only in a comparison), tried on two deformation gradients near I.
+
+    A law that fails on them is left to the fit to report: the answer is then empty.
+    """
+    named = [(name, p) for name, p in law.named_parameters() if p.requires_grad]
+    if not named:
+        return []
+    dtype = named[0][1].dtype
+    F = torch.eye(3, dtype=dtype) + 0.01 * torch.arange(18, dtype=dtype).reshape(2, 3, 3).sin()
+    try:
+        with stable_linalg():
+            output = law(F)
+            if not (isinstance(output, torch.Tensor) and output.requires_grad):
+                return [name for name, _ in named]
+            grads = torch.autograd.grad(output.sum(), [p for _, p in named], allow_unused=True)
+    except Exception:  # the law's own failure: the fit reports it
+        return []
+    return [name for (name, _), grad in zip(named, grads, strict=True) if grad is None]
 
 
 class _Fit:

@@ -11,6 +11,7 @@ from typing import Any
 
 from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
 from tasks.constitutive import prompt_text
+from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import SPECS, ConstitutiveSpec
 
 
@@ -18,6 +19,7 @@ class ConstitutiveTask:
     """Search a constitutive law that reproduces an observed MPM trajectory."""
 
     kind = "equation"
+    options_type = ConstitutiveOptions
     #: What the capture server loads before it confines a capture (see law_capture).
     capture_modules = ("numpy", "torch", "torch.nn", "torch.nn.functional", "torch.linalg",
                        "tasks.constitutive.law_capture")  # fmt: skip

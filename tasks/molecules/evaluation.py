@@ -6,25 +6,19 @@ import time
 
 from sga_agent.task import Evaluation, EvaluationSettings
 from tasks.molecules.calibration import PROPERTY_LABELS
-from tasks.molecules.constants import (
-    DEFAULT_LEARNING_RATE,
-    DEFAULT_STEPS,
-    DEFAULT_STRAIN_WEIGHT,
-)
+from tasks.molecules.constants import DEFAULT_LEARNING_RATE, DEFAULT_STEPS
 from tasks.molecules.feedback import describe, normalized_values
 from tasks.molecules.geometry import build_structure
 from tasks.molecules.inner_loop import Objective, run_inner_loop
+from tasks.molecules.options import MoleculeOptions
 from tasks.molecules.solution import ProposalError, parse_solution
 from tasks.molecules.validation import InvalidMolecule, check_proposal
 from tasks.molecules.xtb import XtbError
 
-OPTIONS = {"strain_weight": "conformer-loss weight per kcal/mol of strain (default 0.3)"}
-"""Keys of ``EvaluationSettings.options`` the molecule tasks read."""
-
 
 def objective_for(prop: str, target: float, settings: EvaluationSettings) -> Objective:
     """The inner-loop objective of a task under ``settings`` (option ``strain_weight``)."""
-    weight = settings.options.get("strain_weight", DEFAULT_STRAIN_WEIGHT)
+    weight = MoleculeOptions(**settings.options).strain_weight
     return Objective(prop=prop, target=target, strain_weight=float(weight))
 
 

@@ -14,6 +14,7 @@ from sga_agent.task import (
 from tasks.molecules import prompt_text
 from tasks.molecules.calibration import PROPERTY_LABELS
 from tasks.molecules.constants import DEFAULT_STEPS, DEFAULT_STRAIN_WEIGHT
+from tasks.molecules.options import MoleculeOptions
 
 SEED_SOLUTION = """\
 # Paracetamol (N-(4-hydroxyphenyl)acetamide): an amide-substituted phenol.
@@ -49,6 +50,7 @@ class MoleculeTask:
     """
 
     kind: TaskKind = "entity"
+    options_type = MoleculeOptions
 
     def __init__(self, name: str, prop: str, target: float) -> None:
         if prop not in PROPERTY_LABELS:

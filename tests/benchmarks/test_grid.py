@@ -190,6 +190,8 @@ def test_presets_grid_runs_each_preset_with_one_proposer(tmp_path, registered):
          "would share the folder 'a'"),
         ("presets", ["--tasks", "number-a", "--model", "builtin", "--presets", "sga,sgaa"],
          "unknown preset 'sgaa'"),
+        ("presets", ["--tasks", "number-a", "--model", "builtin", "--option", "steps=2"],
+         "task 'number-a' has no option 'steps' (its options: none)"),
     ],
 )  # fmt: skip
 def test_bad_input_is_a_usage_error_naming_the_fix(tmp_path, registered, name, args, fragment):

@@ -1,6 +1,7 @@
 """The ``sga-agent`` command line: task listing, evaluation output and exit codes."""
 
 import json
+from importlib import metadata
 from importlib.metadata import EntryPoint
 from pathlib import Path
 
@@ -10,7 +11,11 @@ from click.testing import CliRunner
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.evaluate import extract_solution
+from sga_agent.config import SearchConfig
+from sga_agent.run_store import RunStore
+from sga_agent.task import Evaluation
 from tests.sga_agent.doubles import law_solution
+from tests.sga_agent.test_proposers import closed_port_url
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DOUBLE = "tests.sga_agent.doubles:ExecTask"
@@ -133,6 +138,48 @@ def test_evaluate_usage_errors_exit_2(tmp_path, monkeypatch, args, fragment):
     result = CliRunner().invoke(main, ["evaluate", *args])
     assert result.exit_code == 2, result.output
     assert fragment in result.output
+
+
+def test_a_task_named_by_its_description_is_suggested(tmp_path):
+    result = CliRunner().invoke(main, ["search", "--task", "sand", "--out", str(tmp_path)])
+    assert result.exit_code == 2, result.output
+    assert "no task named 'sand'" in result.output and "Did you mean 'granular'?" in result.output
+    assert not any(tmp_path.iterdir())
+
+
+def test_version():
+    result = CliRunner().invoke(main, ["--version"])
+    assert result.exit_code == 0
+    assert result.output == f"sga-agent, version {metadata.version('sga-agent')}\n"
+
+
+def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkeypatch):
+    monkeypatch.delenv("OPENAI_API_KEY", raising=False)
+    args = ["search", "--task", "granular", "--model", "openai/gpt-4o", "--out", str(tmp_path)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.output
+    assert result.output == "Error: no API key for openai/gpt-4o: set OPENAI_API_KEY\n"
+    assert not any(tmp_path.iterdir())  # no run folder
+
+
+def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):
+    """Resumed after its seed was evaluated, the search asks the model: nothing listens."""
+    config = SearchConfig(
+        task="granular", proposer="hosted_vllm/some-model", api_base=closed_port_url(),
+        iterations=3, exploit=1, explore=1, workers=1,
+    )  # fmt: skip
+    store = RunStore.create(tmp_path, config, {})
+    seed = Evaluation(True, 1.0, "the seed's feedback")
+    store.append({"type": "evaluation", "candidate": "00-seed", "evaluation": seed.to_dict()})
+    result = CliRunner().invoke(main, ["resume", str(store.path)])
+    assert result.exit_code == 1, result.output
+    error = next(line for line in result.output.splitlines() if line.startswith("Error:"))
+    assert "connection refused" in error and "start the server or correct --api-base" in error
+    assert f"sga-agent resume {store.path}" in result.output
+    events = store.events()
+    assert [event["type"] for event in events].count("proposer_error") == 1
+    assert not any(event["type"] == "proposal" for event in events)
+    assert not (store.path / "summary.json").exists()
 
 
 def test_extract_solution_takes_the_last_python_block():

@@ -7,6 +7,7 @@ dummy, and every error path checks that it appears neither in the error nor in t
 from __future__ import annotations
 
 import logging
+import socket
 import time
 from collections.abc import Iterator
 from itertools import count
@@ -155,6 +156,35 @@ def test_retries_give_up_with_the_count_and_cause(litellm: Any) -> None:
     with pytest.raises(ProposerError, match="after 3 attempts.*RateLimitError"):
         proposer(completion=mocked, sleeps=sleeps, max_retries=2).propose(MESSAGES, 1.0, 1)
     assert len(sleeps) == 2
+
+
+def test_giving_up_after_retries_is_transient_and_a_request_error_is_not(litellm: Any) -> None:
+    mocked = Mocked(litellm, "litellm.RateLimitError")
+    with pytest.raises(ProposerError) as raised:
+        proposer(completion=mocked, max_retries=0).propose(MESSAGES, 1.0, 1)
+    assert raised.value.transient
+    bad = litellm.BadRequestError(message="no", llm_provider="openai", model="gpt-4o")
+    with pytest.raises(ProposerError) as raised:
+        proposer(completion=Mocked(litellm, bad)).propose(MESSAGES, 1.0, 1)
+    assert not raised.value.transient
+
+
+def test_nothing_listening_fails_at_once_naming_the_fix(litellm: Any) -> None:
+    """A closed port is not retried (no wait) and is no transient failure."""
+    backbone = proposer("hosted_vllm/some-model", api_base=closed_port_url())
+    with pytest.raises(ProposerError) as raised:
+        backbone.propose(MESSAGES, 1.0, 2)
+    assert not raised.value.transient
+    assert "connection refused" in str(raised.value)
+    assert "start the server or correct --api-base" in str(raised.value)
+
+
+def closed_port_url() -> str:
+    """The URL of a local port nothing listens on."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    return f"http://127.0.0.1:{port}/v1"
 
 
 def test_waits_double_up_to_the_cap() -> None:

@@ -324,7 +324,7 @@ def test_the_ray_executor_without_ray_is_a_usage_error_naming_the_install(tmp_pa
         env={**os.environ, "LITELLM_LOCAL_MODEL_COST_MAP": "True"},
     )  # fmt: skip
     assert run.returncode == 2, run.stderr
-    assert 'pip install "sga[ray]"' in run.stderr and "--executor local" in run.stderr
+    assert 'pip install "sga-agent[ray]"' in run.stderr and "--executor local" in run.stderr
     assert not any(tmp_path.iterdir())  # nothing started, no run folder
 
 

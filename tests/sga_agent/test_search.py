@@ -219,8 +219,39 @@ def test_replay_needs_no_model(tmp_path):
     ]
 
 
-def test_proposer_failure_is_recorded_not_raised(tmp_path):
-    result, store, *_ = run(tmp_path, [LAW.format(value=2.0)])
-    events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
-    assert any(event["type"] == "proposer_error" for event in events)
+class Failing(Scripted):
+    """Proposer double: answers from a list, then fails (transiently or for good)."""
+
+    def __init__(self, answers: list[str], transient: bool) -> None:
+        super().__init__(answers)
+        self.transient = transient
+
+    def propose(self, messages, temperature, n):
+        if not self.answers:
+            self.temperatures += [temperature] * n
+            raise ProposerError("scripted failure", transient=self.transient)
+        return super().propose(messages, temperature, n)
+
+
+def test_a_transient_proposer_failure_is_recorded_and_the_search_goes_on(tmp_path):
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {})
+    proposer = Failing([LAW.format(value=2.0)], transient=True)
+    result = Search(cfg, FakeTask(), proposer, LossInCode(), store).run()
+    errors = [event for event in store.events() if event["type"] == "proposer_error"]
+    assert errors and all(event["transient"] for event in errors)
     assert result.best.loss == 2.0
+    assert len(proposer.temperatures) == 6  # every batch of both iterations was asked
+
+
+def test_a_hard_proposer_failure_stops_the_search_resumably(tmp_path):
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {})
+    proposer = Failing([], transient=False)
+    with pytest.raises(ProposerError, match="scripted failure"):
+        Search(cfg, FakeTask(), proposer, LossInCode(), store).run()
+    assert proposer.temperatures == [0.5]  # the first batch, nothing after it
+    (error,) = [event for event in store.events() if event["type"] == "proposer_error"]
+    assert error["transient"] is False
+    assert not (store.path / "summary.json").exists()
+    assert not store.recorded().finished

@@ -1,8 +1,10 @@
 """The ``taichi-mpm`` command line: demo run, PNG output, user errors, help."""
 
+import os
 import struct
 import subprocess
 import sys
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +98,17 @@ def test_python_dash_m_runs_the_cli():
     )
     assert result.returncode == 0, result.stderr
     assert "demo" in result.stdout
+
+
+def test_help_comes_without_taichis_banner_and_version_is_known():
+    env = {k: v for k, v in os.environ.items() if k != "ENABLE_TAICHI_HEADER_PRINT"}
+    command = [sys.executable, "-m", "taichi_mpm"]
+    helped = subprocess.run([*command, "--help"], capture_output=True, text=True, env=env)
+    assert helped.returncode == 0, helped.stderr
+    assert helped.stdout.startswith("Usage: taichi-mpm") and "[Taichi]" not in helped.stderr
+    version = CliRunner().invoke(main, ["--version"])
+    assert version.exit_code == 0
+    assert version.output == f"taichi-mpm, version {metadata.version('sga-agent')}\n"
 
 
 @pytest.mark.slow

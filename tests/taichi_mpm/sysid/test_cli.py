@@ -104,12 +104,13 @@ def test_sysid_recovers_youngs_modulus(observed, tmp_path, monkeypatch):
     assert np.ptp(image[..., :3]) > 0.5  # not a blank picture
 
 
-def test_sysid_missing_file_is_a_clear_error(tmp_path):
+def test_sysid_missing_file_is_a_usage_error(tmp_path):
+    """Exit 2, as `sga-agent evaluate` for a missing file."""
     result = CliRunner().invoke(
         main, ["sysid", str(tmp_path / "absent.npz"), "--material", "neohookean"]
     )
-    assert result.exit_code == 1, result.output
-    assert "no observation file at" in result.output and "absent.npz" in result.output
+    assert result.exit_code == 2, result.output
+    assert "'OBSERVED'" in result.output and "absent.npz' does not exist" in result.output
     assert "Traceback" not in result.output
     assert not (tmp_path / "sysid_out").exists()
 
@@ -184,6 +185,15 @@ def test_make_observation_rejects_bad_arguments(tmp_path, args, fragment):
     assert fragment in done.stderr
     assert "Traceback" not in done.stderr
     assert not list(tmp_path.iterdir())
+
+
+def test_make_observation_is_a_click_command():
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--help"], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("Usage: make_observation.py [OPTIONS] OUT")
+    assert "vonmises" in done.stdout and "--noise FLOAT RANGE" in done.stdout
 
 
 def test_every_family_builds_with_its_default_parameters():

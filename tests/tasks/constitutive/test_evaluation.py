@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings, InvalidSolution, Task
@@ -209,3 +210,62 @@ def test_the_fit_refuses_data_that_is_not_a_checked_graph(data, reason):
     result = load_task("plasticine").evaluate(data, EvaluationSettings(epochs=0, options=QUICK))
     assert not result.valid and result.status == "invalid"
     assert reason in result.reason and "\n" not in result.reason
+
+
+def test_a_precision_other_than_the_running_one_is_an_error():
+    """The test session runs Taichi in float64 (tests/conftest.py)."""
+    task = load_task("elastic")
+    with pytest.raises(ValueError, match="precision=float32 differs from the float64 Taichi"):
+        task.evaluate({}, EvaluationSettings(options={"precision": "float32"}))
+
+
+UNUSED = """import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def __init__(self, log_youngs_modulus: float = 10.0, poissons_ratio: float = 0.2):
+        super().__init__()
+        self.log_youngs_modulus = nn.Parameter(torch.tensor(log_youngs_modulus))
+        self.poissons_ratio = nn.Parameter(torch.tensor(poissons_ratio))
+
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        I = torch.eye(3, dtype=F.dtype, device=F.device)
+        return {stress}
+"""
+#: Uses neither parameter / only the Young's modulus (a small linear law).
+NEITHER = "1e3 * (F + F.transpose(1, 2) - 2 * I)"
+ONE = "torch.exp(self.log_youngs_modulus) * 1e-2 * (F + F.transpose(1, 2) - 2 * I)"
+
+
+def test_parameters_the_output_ignores_are_found_without_simulating():
+    from tasks.constitutive.inner import unused_parameters
+    from tasks.constitutive.law_graph import build_law
+
+    task = load_task("elastic")
+    for stress, unused in [(NEITHER, ["log_youngs_modulus", "poissons_ratio"]),
+                           (ONE, ["poissons_ratio"])]:  # fmt: skip
+        law = build_law(task.capture(UNUSED.format(stress=stress))["law"], torch.float64)
+        assert unused_parameters(law) == unused
+
+
+ONE_SENTENCE = (
+    "The loss does not depend on the parameter poissons_ratio (no gradient reaches it from the "
+    "law's output), so it was not fitted: use it in forward or remove it."
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("stress", "unused"), [(NEITHER, 2), (ONE, 1)])
+def test_a_parameter_the_loss_ignores_is_named_in_one_sentence(stress, unused):
+    """Fitted, not "element 0 of tensors does not require grad"."""
+    result = score("elastic", UNUSED.format(stress=stress), epochs=1, options={"steps": 100})
+    assert result.valid, result.reason
+    sentences = [line for line in result.feedback.splitlines() if "does not depend" in line]
+    assert len(sentences) == 1 and "poissons_ratio" in sentences[0]
+    if unused == 1:
+        assert sentences == [ONE_SENTENCE]
+        assert list(result.parameters) == ["log_youngs_modulus"]
+    else:
+        assert "parameters log_youngs_modulus, poissons_ratio" in sentences[0]
+        assert result.parameters == {}
