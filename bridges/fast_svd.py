@@ -1,11 +1,15 @@
-"""Batched float32 3x3 SVD values from Taichi's ``ti.svd``, 3x faster than ``torch.linalg.svd``.
+"""Batched 3x3 SVD in Taichi kernels: values from ``ti.svd`` (float32), and the backward.
 
 torch runs a LAPACK call per 3x3 matrix (~1.7 us each on this CPU); ``ti.svd`` is an unrolled
 Jacobi iteration over the whole batch in one kernel (0.57 ms for 1000 matrices, 1.7 ms with
 torch). Its float32 result is as accurate as float32 allows (reconstruction ~1e-6), but its
 float64 variant only reaches ~1e-10, far from LAPACK's 1e-15, so float64 stays with torch.
-Used for the values of :func:`bridges.linalg.svd` (the backward is the same either way) when a
-float32 Taichi CPU runtime is running; otherwise the caller falls back to torch.
+Used for the values of :func:`bridges.linalg.svd` when a float32 Taichi CPU runtime is running;
+otherwise the caller falls back to torch.
+
+The backward of :func:`bridges.linalg.svd` (its clamped formula) is one Taichi pass per matrix
+wherever a Taichi CPU runtime of the tensors' precision runs: torch spends ~25 small batched
+operations on it.
 """
 
 from __future__ import annotations
@@ -13,7 +17,22 @@ from __future__ import annotations
 import torch
 
 from taichi_mpm import runtime
-from taichi_mpm.simulator import PARALLEL_THRESHOLD
+
+_PRECISIONS = {torch.float32: "float32", torch.float64: "float64"}
+
+
+def _runs_in_taichi(tensor: torch.Tensor, precisions: tuple[str, ...]) -> bool:
+    """A non-empty CPU batch of 3x3 matrices, in a precision of ``precisions`` that a Taichi CPU
+    runtime runs in."""
+    if tensor.device.type != "cpu" or tensor.ndim < 2 or tensor.shape[-2:] != (3, 3):
+        return False
+    if tensor.numel() == 0 or _PRECISIONS.get(tensor.dtype) not in precisions:
+        return False
+    try:
+        info = runtime.current()
+    except runtime.RuntimeNotInitialized:
+        return False
+    return info.arch == "cpu" and info.precision == _PRECISIONS[tensor.dtype]
 
 
 def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
@@ -22,22 +41,43 @@ def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
     None unless ``F`` is a non-empty float32 batch of 3x3 matrices on the CPU and a float32
     Taichi CPU runtime is running. Singular values come sorted by decreasing magnitude.
     """
-    if F.dtype != torch.float32 or F.device.type != "cpu" or F.ndim < 2:
-        return None
-    if F.shape[-2:] != (3, 3) or F.numel() == 0:
-        return None
-    try:
-        info = runtime.current()
-    except runtime.RuntimeNotInitialized:
-        return None
-    if info.arch != "cpu" or info.precision != "float32":
+    if not _runs_in_taichi(F, ("float32",)):
         return None
     from bridges import kernels  # compiles on first use only
 
     flat = F.detach().reshape(-1, 9).contiguous()
     out = flat.new_empty(flat.shape[0], 21)  # U, S, V per row
-    kernels.svd3(flat, out, flat.shape[0] < PARALLEL_THRESHOLD)
+    kernels.svd3(flat, out, not runtime.parallel_worthwhile(flat.shape[0]))
     batch = F.shape[:-2]
     U = out[:, :9].reshape(*batch, 3, 3)
     V = out[:, 12:].reshape(*batch, 3, 3)
     return U, out[:, 9:12].reshape(*batch, 3), V.mT
+
+
+def taichi_svd_backward(
+    U: torch.Tensor,
+    S: torch.Tensor,
+    Vh: torch.Tensor,
+    grads: tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None],
+    tol_factor: float,
+) -> torch.Tensor | None:
+    """dL/dF of ``F = U diag(S) Vh`` from ``grads`` = (dL/dU, dL/dS, dL/dVh), any of them None
+    (zero), with the clamp of :mod:`bridges.linalg`; None where Taichi does not apply."""
+    if not _runs_in_taichi(U, ("float32", "float64")):
+        return None
+    from bridges import kernels
+
+    batch = U.shape[:-2]
+
+    def rows(tensor: torch.Tensor | None, like: torch.Tensor, width: int) -> torch.Tensor:
+        if tensor is None:
+            return like.new_zeros(like[..., 0, 0].numel(), width)
+        return tensor.reshape(-1, width).contiguous()
+
+    F_grad = U.new_empty(U[..., 0, 0].numel(), 9)
+    kernels.svd3_backward(
+        rows(U, U, 9), rows(S, U, 3), rows(Vh, U, 9),
+        rows(grads[0], U, 9), rows(grads[1], U, 3), rows(grads[2], U, 9),
+        F_grad, tol_factor, not runtime.parallel_worthwhile(F_grad.shape[0]),
+    )  # fmt: skip
+    return F_grad.reshape(*batch, 3, 3)

@@ -49,7 +49,7 @@ def _put_mat(t: ti.template(), p, offset, value):
 
 
 @ti.func
-def _transfer(
+def _load_and_scatter(
     packed: ti.template(),
     x: ti.template(),
     v: ti.template(),
@@ -63,7 +63,8 @@ def _transfer(
     settings: ti.template(),
     serial: ti.template(),
 ):
-    """Load the packed input into each copy's input slot, then P2G, grid update and G2P."""
+    """Load the packed input into each copy's input slot, then P2G and the grid update (all
+    the reverse pass needs recomputed: G2P's reverse reads only its inputs)."""
     dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
     B, N, n = x.shape[0] // 2, x.shape[1], grid_mass.shape[1]
     ti.loop_config(serialize=serial)
@@ -85,9 +86,6 @@ def _transfer(
     for b, i, j, k in ti.ndrange(B, n, n, n):
         update_node(grid_mass, grid_momentum, 2 * b, i, j, k, grid_velocity, dt,
                     ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(B, N):
-        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
 
 
 @ti.kernel
@@ -116,11 +114,12 @@ def step_forward(
     serial: ti.template(),
 ):
     """One step: packed (B * N, 33) input -> packed (B * N, 24) output (x, v, C, F_trial)."""
-    _transfer(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum, grid_velocity,
-              (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
-              serial)  # fmt: skip
+    _load_and_scatter(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum,
+                      grid_velocity, (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness,
+                      friction), serial)  # fmt: skip
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
+        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
         row = b * x.shape[1] + p
         _put_vec(out, row, COL_X, x[2 * b + 1, p])
         _put_vec(out, row, COL_V, v[2 * b + 1, p])
@@ -162,10 +161,11 @@ def recompute_and_seed(
     friction: float,
     serial: ti.template(),
 ):
-    """Redo the step's forward (its grid is needed), clear all adjoints, seed dL/d(output)."""
-    _transfer(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum, grid_velocity,
-              (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
-              serial)  # fmt: skip
+    """Redo the step's P2G and grid update (the reverse pass reads the grid), clear the
+    adjoints, seed dL/d(output)."""
+    _load_and_scatter(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum,
+                      grid_velocity, (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness,
+                      friction), serial)  # fmt: skip
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
         row = b * x.shape[1] + p
@@ -281,3 +281,45 @@ def svd3(F: ti.types.ndarray(), out: ti.types.ndarray(), serial: ti.template()):
         for i in ti.static(range(3)):
             out[p, 9 + i] = s[i, i]
         _put_mat(out, p, 12, v)
+
+
+@ti.func
+def _clamp_magnitude(x, tol):
+    return ti.max(x, tol) if x >= 0 else ti.min(x, -tol)
+
+
+@ti.kernel
+def svd3_backward(
+    U: ti.types.ndarray(),
+    S: ti.types.ndarray(),
+    Vh: ti.types.ndarray(),
+    U_grad: ti.types.ndarray(),
+    S_grad: ti.types.ndarray(),
+    Vh_grad: ti.types.ndarray(),
+    F_grad: ti.types.ndarray(),
+    tol_factor: float,
+    serial: ti.template(),
+):
+    """dL/dF of F = U diag(S) Vh from dL/dU, dL/dS, dL/dVh, rows of (B, 9) / (B, 3) arrays.
+
+    The clamped formula of :mod:`bridges.linalg` in one pass per matrix:
+    ``U (sym(a + b) / (s_j - s_i) + (a - b) / (s_j + s_i)) / 2 + diag(dL/dS)) Vh``, each
+    denominator's magnitude at least ``tol_factor * max(1, max_k |s_k|)``.
+    """
+    ti.loop_config(serialize=serial)
+    for p in range(U.shape[0]):
+        u, vh = _mat(U, p, 0), _mat(Vh, p, 0)
+        s = ti.Vector([S[p, 0], S[p, 1], S[p, 2]], dt=float)
+        a = u.transpose() @ _mat(U_grad, p, 0)
+        b = vh @ _mat(Vh_grad, p, 0).transpose()
+        a, b = a - a.transpose(), b - b.transpose()
+        tol = tol_factor * ti.max(1.0, ti.max(ti.abs(s[0]), ti.abs(s[1]), ti.abs(s[2])))
+        inner = ti.Matrix.zero(float, 3, 3)
+        for i, j in ti.static(ti.ndrange(3, 3)):
+            if ti.static(i == j):
+                inner[i, j] = S_grad[p, i]
+            else:
+                gap = _clamp_magnitude(s[j] - s[i], tol)
+                total = _clamp_magnitude(s[j] + s[i], tol)
+                inner[i, j] = 0.5 * ((a[i, j] + b[i, j]) / gap + (a[i, j] - b[i, j]) / total)
+        _put_mat(F_grad, p, 0, u @ inner @ vh)

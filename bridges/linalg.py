@@ -37,7 +37,7 @@ from collections.abc import Iterator
 import torch
 from torch.autograd.function import once_differentiable
 
-from bridges.fast_svd import taichi_svd
+from bridges.fast_svd import taichi_svd, taichi_svd_backward
 
 __all__ = ["polar", "stable_linalg", "svd", "trace"]
 
@@ -66,20 +66,28 @@ class _SVD(torch.autograd.Function):
     @once_differentiable
     def backward(ctx, gU, gS, gVh):
         U, S, Vh = ctx.saved_tensors
-        inner = torch.zeros_like(U)
-        if gU is not None or gVh is not None:
-            a = U.mT @ gU if gU is not None else torch.zeros_like(U)
-            b = Vh @ gVh.mT if gVh is not None else torch.zeros_like(U)
-            a, b = a - a.mT, b - b.mT
-            s_i, s_j = S[..., :, None], S[..., None, :]
-            tol = torch.finfo(S.dtype).eps ** 0.5 * S.abs().amax(-1).clamp(min=1.0)
-            tol = tol[..., None, None]
-            inner = (a + b) / (2 * _clamp_magnitude(s_j - s_i, tol)) + (a - b) / (
-                2 * _clamp_magnitude(s_j + s_i, tol)
-            )
-        if gS is not None:
-            inner = inner + torch.diag_embed(gS)
-        return U @ inner @ Vh, None
+        tol_factor = torch.finfo(S.dtype).eps ** 0.5
+        fast = taichi_svd_backward(U, S, Vh, (gU, gS, gVh), tol_factor)
+        return (fast if fast is not None else svd_backward(U, S, Vh, gU, gS, gVh)), None
+
+
+def svd_backward(U, S, Vh, gU, gS, gVh) -> torch.Tensor:
+    """dL/dF of F = U diag(S) Vh in torch, clamped as the module docstring says (any of the
+    incoming gradients may be None)."""
+    inner = torch.zeros_like(U)
+    if gU is not None or gVh is not None:
+        a = U.mT @ gU if gU is not None else torch.zeros_like(U)
+        b = Vh @ gVh.mT if gVh is not None else torch.zeros_like(U)
+        a, b = a - a.mT, b - b.mT
+        s_i, s_j = S[..., :, None], S[..., None, :]
+        tol = torch.finfo(S.dtype).eps ** 0.5 * S.abs().amax(-1).clamp(min=1.0)
+        tol = tol[..., None, None]
+        inner = (a + b) / (2 * _clamp_magnitude(s_j - s_i, tol)) + (a - b) / (
+            2 * _clamp_magnitude(s_j + s_i, tol)
+        )
+    if gS is not None:
+        inner = inner + torch.diag_embed(gS)
+    return U @ inner @ Vh
 
 
 def _decompose(F: torch.Tensor, signed: bool) -> tuple[torch.Tensor, ...]:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
+from torch.utils import checkpoint as torch_checkpoint
 
 from bridges.linalg import stable_linalg
 from bridges.step import Transfer, mpm_step
@@ -100,6 +101,13 @@ class Rollout:
         ``forward(F) -> Kirchhoff stress`` on (N, 3, 3) tensors.
     transfer : Transfer, optional
         Reuse another rollout's Taichi arrays (same scene size).
+
+    Attributes
+    ----------
+    recompute_laws : bool
+        Keep only each step's input F in the autograd graph and run the laws again during
+        backward (``torch.utils.checkpoint``): less memory per step for laws with many
+        intermediates, one more forward pass of the laws. Off by default.
     """
 
     def __init__(
@@ -111,6 +119,7 @@ class Rollout:
         self.transfer = transfer if transfer is not None else Transfer(scene)
         self.dtype = self.transfer.dtype
         self._batched: dict[int, Transfer] = {1: self.transfer}
+        self.recompute_laws = False
 
     def transfer_for(self, batch: int) -> Transfer:
         """The Taichi arrays for ``batch`` copies of the scene (made once per batch size)."""
@@ -120,9 +129,16 @@ class Rollout:
 
     def step(self, state: State, batch: int = 1) -> State:
         """One differentiable step of ``batch`` independent copies (their states stacked)."""
-        F = self.plastic(state.F)
-        stress = self.elastic(F)
+        if self.recompute_laws and torch.is_grad_enabled():
+            F, stress = torch_checkpoint.checkpoint(self._laws, state.F, use_reentrant=False)
+        else:
+            F, stress = self._laws(state.F)
         return State(*mpm_step(state.x, state.v, state.C, F, stress, self.transfer_for(batch)))
+
+    def _laws(self, F_trial: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        with stable_linalg():  # also when backward re-runs it, outside any rollout
+            F = self.plastic(F_trial)
+            return F, self.elastic(F)
 
     def check_laws(self, state: State) -> None:
         """Check that both laws map ``state.F`` to finite (N, 3, 3) tensors, particle by
@@ -230,21 +246,25 @@ def trajectory_loss(
 def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_bytes: int) -> int:
     """How many teacher-forced segments of ``segment`` steps fit ``budget_bytes`` of graph.
 
-    Measured, not guessed: one step from ``state`` is run with gradients and the tensors its
-    graph saves (the laws' intermediates and the step's packed input) are counted; a segment
-    holds ``segment`` such steps per copy. At least 1.
+    Measured, not guessed: a step is run with gradients from the end of another one and what
+    its graph keeps is counted (the tensors it saves, the laws' intermediates and the packed
+    input among them, and the storage of its input state); a segment holds ``segment`` such
+    steps per copy. At least 1.
     """
-    saved: dict[int, int] = {}
+    with torch.no_grad():
+        previous = rollout.step(state.detached())  # its outputs are views of one packed tensor
+    storage = previous.F.untyped_storage()
+    kept: dict[int, int] = {storage.data_ptr(): storage.nbytes()}
 
     def count(tensor: torch.Tensor) -> torch.Tensor:
         storage = tensor.untyped_storage()
-        saved[storage.data_ptr()] = storage.nbytes()
+        kept[storage.data_ptr()] = storage.nbytes()
         return tensor
 
     with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor), stable_linalg():
-        end = rollout.step(state.detached())
-        ((end.x - state.x) ** 2).sum()  # the loss term of a step
-    return max(1, budget_bytes // max(1, sum(saved.values()) * segment))
+        end = rollout.step(previous)
+        ((end.x - previous.x) ** 2).sum()  # the loss term of a step
+    return max(1, budget_bytes // max(1, sum(kept.values()) * segment))
 
 
 def _groups(starts: list[int], steps: int, segment: int, batch: int) -> list[list[int]]:

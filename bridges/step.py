@@ -27,7 +27,6 @@ from bridges import kernels
 from taichi_mpm import runtime
 from taichi_mpm.kernels import transfer as tk
 from taichi_mpm.scene import Scene
-from taichi_mpm.simulator import PARALLEL_THRESHOLD
 
 _WALL_CODES = {"slip": tk.SLIP, "sticky": tk.STICKY, "separate": tk.SEPARATE}
 
@@ -45,7 +44,8 @@ class Transfer:
     scene : taichi_mpm.Scene
         Grid, time step, walls, particle mass and volume (its initial state is not used).
     parallel : bool, optional
-        Parallel loops; default as in :class:`taichi_mpm.Simulator` (by all copies' particles).
+        Parallel loops; by default where :func:`taichi_mpm.runtime.parallel_worthwhile` says so
+        for all copies' particles.
     batch : int
         Independent copies of the scene stepped at once, each on its own grid: the tensors of a
         step hold ``batch * N`` particles, copy b in rows ``b * N`` to ``(b + 1) * N - 1``.
@@ -59,7 +59,7 @@ class Transfer:
         self.batch = batch
         self.dtype = torch_dtype()
         if parallel is None:
-            parallel = info.arch != "cpu" or batch * scene.num_particles >= PARALLEL_THRESHOLD
+            parallel = runtime.parallel_worthwhile(batch * scene.num_particles)
         self._serial = not parallel
         n, N = scene.grid_resolution, scene.num_particles
         vec, mat = ti.types.vector(3, info.dtype), ti.types.matrix(3, 3, info.dtype)
@@ -144,24 +144,15 @@ def _unpack(packed: torch.Tensor, columns: tuple[int, ...]) -> tuple[torch.Tenso
 class _MPMStep(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x, v, C, F, stress, transfer: Transfer):
-        N, dtype = transfer.num_particles, transfer.dtype
-        packed = torch.cat(
-            [
-                _flat(x, "x", (N, 3), dtype),
-                _flat(v, "v", (N, 3), dtype),
-                _flat(C, "C", (N, 3, 3), dtype),
-                _flat(F, "F", (N, 3, 3), dtype),
-                _flat(stress, "stress", (N, 3, 3), dtype),
-            ],
-            dim=1,
-        )
         ctx.transfer = transfer
-        ctx.save_for_backward(packed)
-        return _unpack(transfer.forward(packed), (3, 3, 9, 9))
+        # the inputs, not their packed copy: x, v and C are views of the previous step's
+        # output, which the graph keeps anyway, so only F and stress cost memory
+        ctx.save_for_backward(x, v, C, F, stress)
+        return _unpack(transfer.forward(_packed(transfer, x, v, C, F, stress)), (3, 3, 9, 9))
 
     @staticmethod
     def backward(ctx, *output_grads):
-        (packed,) = ctx.saved_tensors
+        packed = _packed(ctx.transfer, *ctx.saved_tensors)
         N = packed.shape[0]
         widths = (3, 3, 9, 9)
         output_grad = torch.cat(
@@ -172,6 +163,21 @@ class _MPMStep(torch.autograd.Function):
             dim=1,
         )
         return (*_unpack(ctx.transfer.backward(packed, output_grad), (3, 3, 9, 9, 9)), None)
+
+
+def _packed(transfer: Transfer, x, v, C, F, stress) -> torch.Tensor:
+    """One (N, 33) row per particle: x, v, C, F, stress (checked shapes and dtype)."""
+    N, dtype = transfer.num_particles, transfer.dtype
+    return torch.cat(
+        [
+            _flat(x, "x", (N, 3), dtype),
+            _flat(v, "v", (N, 3), dtype),
+            _flat(C, "C", (N, 3, 3), dtype),
+            _flat(F, "F", (N, 3, 3), dtype),
+            _flat(stress, "stress", (N, 3, 3), dtype),
+        ],
+        dim=1,
+    )
 
 
 def mpm_step(x, v, C, F, stress, transfer: Transfer):

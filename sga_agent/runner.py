@@ -16,7 +16,7 @@ from sga_agent.config import SearchConfig
 from sga_agent.proposers.base import Proposer
 from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
-from sga_agent.sandbox import SandboxLimits, SandboxPool
+from sga_agent.sandbox import SandboxLimits, SandboxPool, threads_per_worker
 from sga_agent.search import Search, SearchResult
 from sga_agent.task import BuiltinProposer, Task
 
@@ -76,7 +76,11 @@ def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
     sga_agent.ray_executor.RayUnavailableError
         The ray executor without Ray installed, or with no cluster at ``config.ray_address``.
     """
-    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
+    limits = SandboxLimits(
+        timeout_s=config.timeout_s,
+        memory_mb=config.memory_mb,
+        threads=threads_per_worker(config.workers) if config.executor == "local" else 1,
+    )
     if config.executor == "local":
         return SandboxPool(max_workers=config.workers, limits=limits)
     return RayPool(

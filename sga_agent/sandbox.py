@@ -118,8 +118,10 @@ class SandboxLimits:
         Largest file the capture process may write, in MiB (it may write none anyway).
     threads : int
         Threads of the fit's numerical libraries (OpenMP, torch, Taichi's CPU backend); the
-        capture runs on one. The CPU-time limit of a capture is
-        ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
+        capture runs on one. Searches and ``sga-agent evaluate`` give each evaluation the
+        machine's cores divided by the evaluations running at once
+        (:func:`threads_per_worker`), set when its fit worker starts. The CPU-time limit of a
+        capture is ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
     isolation : bool
         Confine the capture process as :mod:`sga_agent.isolation` describes. Turn it off only
         to debug a task: candidate code then runs with the search's user and files.
@@ -618,6 +620,11 @@ class SandboxPool:
             return Evaluation.invalid(reason, status="error")
         finally:
             self._slots.put(evaluator)
+
+
+def threads_per_worker(workers: int) -> int:
+    """The machine's cores shared by ``workers`` evaluations at once (at least 1 each)."""
+    return max(1, (os.cpu_count() or 1) // max(1, workers))
 
 
 def worker_environment(

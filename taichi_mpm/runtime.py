@@ -26,6 +26,7 @@ class RuntimeInfo:
     arch: str
     precision: str
     backend: str  # what Taichi actually runs on (it falls back to the CPU without a GPU)
+    threads: int = 1  # CPU threads of Taichi's parallel loops (TI_CPU_MAX_NUM_THREADS)
 
     @property
     def dtype(self):
@@ -39,6 +40,10 @@ class RuntimeInfo:
 
 
 _current: RuntimeInfo | None = None
+
+#: Loops over at least this many items are worth running in parallel when Taichi has more
+#: than one CPU thread (on smaller ones, waking the threads costs more than it saves).
+PARALLEL_MIN_ITEMS = 4096
 
 
 def init(
@@ -81,7 +86,8 @@ def init(
     )
     backend = ti.lang.impl.current_cfg().arch.name  # no public accessor in Taichi 1.7
     backend = "cpu" if backend in ("x64", "arm64") else backend
-    _current = RuntimeInfo(arch=arch, precision=precision, backend=backend)
+    threads = ti.lang.impl.current_cfg().cpu_max_num_threads
+    _current = RuntimeInfo(arch=arch, precision=precision, backend=backend, threads=threads)
     return _current
 
 
@@ -92,3 +98,9 @@ def current() -> RuntimeInfo:
             "taichi_mpm is not initialised: call taichi_mpm.init(arch='cpu') first"
         )
     return _current
+
+
+def parallel_worthwhile(items: int) -> bool:
+    """Whether a loop over ``items`` particles should run in parallel on this runtime."""
+    info = current()
+    return info.arch != "cpu" or (info.threads > 1 and items >= PARALLEL_MIN_ITEMS)

@@ -19,7 +19,7 @@ from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
 from sga_agent.parsing import CodeRejected, check_code
-from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
+from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox, threads_per_worker
 from sga_agent.task import Evaluation, EvaluationSettings, Task
 
 _FENCED_PYTHON = re.compile(r"```python[^\n]*\n(.*?)```", re.DOTALL)
@@ -109,7 +109,7 @@ def evaluate(
     extra_path = [Path.cwd()] if ":" in task_name else []
     task = _task(task_name, extra_path)
     typed = typed_task_options(task, options)
-    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb)
+    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb, threads=threads_per_worker(1))
     settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=typed)
     solution = extract_solution(text)
     try:

@@ -182,3 +182,23 @@ def test_stable_linalg_is_reentrant_and_restores_after_errors():
     with pytest.raises(RuntimeError, match="inside"), stable_linalg():
         raise RuntimeError("inside")
     assert current() == ORIGINALS
+
+
+@pytest.mark.parametrize("missing", [None, 0, 1, 2])
+def test_taichi_svd_backward_equals_the_torch_formula(missing):
+    """The one-pass Taichi backward gives torch's clamped formula, repeated values included."""
+    from bridges.fast_svd import taichi_svd_backward
+    from bridges.linalg import svd_backward
+
+    F = torch.cat([random_F(40, seed=5), with_singular_values((1.0, 1.0, 0.5))[None],
+                   with_singular_values((2.0, 2.0 + 1e-9, 2.0))[None]])  # fmt: skip
+    U, S, Vh = svd(F)
+    generator = torch.Generator().manual_seed(9)
+    grads = [torch.randn(t.shape, generator=generator, dtype=DTYPE) for t in (U, S, Vh)]
+    if missing is not None:
+        grads[missing] = None
+    tol_factor = torch.finfo(DTYPE).eps ** 0.5
+    fast = taichi_svd_backward(U, S, Vh, tuple(grads), tol_factor)
+    assert fast is not None  # the tests run a float64 Taichi CPU runtime
+    expected = svd_backward(U, S, Vh, *grads)
+    torch.testing.assert_close(fast, expected, rtol=1e-9, atol=1e-9)
