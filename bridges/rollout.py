@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
-from torch.utils import checkpoint as torch_checkpoint
 
 from bridges.linalg import stable_linalg
 from bridges.step import Transfer, mpm_step
@@ -101,13 +100,6 @@ class Rollout:
         ``forward(F) -> Kirchhoff stress`` on (N, 3, 3) tensors.
     transfer : Transfer, optional
         Reuse another rollout's Taichi arrays (same scene size).
-
-    Attributes
-    ----------
-    recompute_laws : bool
-        Keep only each step's input F in the autograd graph and run the laws again during
-        backward (``torch.utils.checkpoint``): less memory per step for laws with many
-        intermediates, one more forward pass of the laws. Off by default.
     """
 
     def __init__(
@@ -119,7 +111,6 @@ class Rollout:
         self.transfer = transfer if transfer is not None else Transfer(scene)
         self.dtype = self.transfer.dtype
         self._batched: dict[int, Transfer] = {1: self.transfer}
-        self.recompute_laws = False
 
     def transfer_for(self, batch: int) -> Transfer:
         """The Taichi arrays for ``batch`` copies of the scene (made once per batch size)."""
@@ -129,16 +120,9 @@ class Rollout:
 
     def step(self, state: State, batch: int = 1) -> State:
         """One differentiable step of ``batch`` independent copies (their states stacked)."""
-        if self.recompute_laws and torch.is_grad_enabled():
-            F, stress = torch_checkpoint.checkpoint(self._laws, state.F, use_reentrant=False)
-        else:
-            F, stress = self._laws(state.F)
+        F = self.plastic(state.F)
+        stress = self.elastic(F)
         return State(*mpm_step(state.x, state.v, state.C, F, stress, self.transfer_for(batch)))
-
-    def _laws(self, F_trial: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        with stable_linalg():  # also when backward re-runs it, outside any rollout
-            F = self.plastic(F_trial)
-            return F, self.elastic(F)
 
     def check_laws(self, state: State) -> None:
         """Check that both laws map ``state.F`` to finite (N, 3, 3) tensors, particle by

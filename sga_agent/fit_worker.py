@@ -1,4 +1,5 @@
-"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB``, run by .sandbox.
+"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS]``, run by
+.sandbox.
 
 It scores captured solutions: one request per line of its standard input::
 
@@ -7,7 +8,10 @@ It scores captured solutions: one request per line of its standard input::
 and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
 It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
 ``evaluate`` checks before it uses it. So what it reports can be believed, and it stays warm
-(torch, Taichi, kernels and ground truth loaded) from one candidate to the next.
+(torch, Taichi, kernels and ground truth loaded) from one candidate to the next. Once it has
+said it is ready it runs the task's ``warm_up_fit(OPTIONS)`` if the task has one (OPTIONS: the
+JSON task options of its evaluations), so that the first candidate does not pay for loading
+and compiling; a request sent meanwhile waits in the pipe.
 
 Its writable private memory is limited (``RLIMIT_DATA``, MEMORY_MB MiB; see :mod:`.sandbox`). A
 failure to allocate becomes an ``out_of_memory`` Evaluation, after which the worker exits so
@@ -32,8 +36,8 @@ TRACEBACK_TAIL_CHARS = 4000
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if len(args) != 2:
-        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB", file=sys.stderr)
+    if len(args) not in (2, 3):
+        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS]", file=sys.stderr)
         return 2
     answers = start_helper()
     memory = int(args[1]) * 2**20
@@ -45,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as error:  # a plugin may fail to import in any way
         task, failure = None, _from_exception(f"could not load task {args[0]!r}:", error)
     answer(answers, {"ready": failure is None})
+    if task is not None and len(args) == 3:
+        warm_up(task, json.loads(args[2]))
     for line in sys.stdin:
         request = json.loads(line)
         evaluation = failure or score(task, request["data"], request["settings"])
@@ -52,6 +58,18 @@ def main(argv: list[str] | None = None) -> int:
         if evaluation.status == "out_of_memory":
             return 0
     return 0
+
+
+def warm_up(task: Task, options: dict[str, Any]) -> None:
+    """The task's own ``warm_up_fit``, if any; a failure is left to the evaluations to meet."""
+    warm = getattr(task, "warm_up_fit", None)
+    if not callable(warm):
+        return
+    try:
+        warm(options)
+    except Exception as error:  # the first evaluation meets and reports what is wrong
+        described, formatted = describe(error, TRACEBACK_TAIL_CHARS)
+        print(f"warm-up failed: {described}\n{formatted}", file=sys.stderr)
 
 
 def score(task: Task, data: Any, settings: dict[str, Any]) -> Evaluation:

@@ -280,8 +280,8 @@ class EvaluationSlot:
         """
         start = time.monotonic()
         request = _settings_json(settings)
-        key = f"{task}\n{json.dumps(request['options'], sort_keys=True)}"
-        self._start_fit_worker(task, key)
+        options = json.dumps(request["options"], sort_keys=True)
+        self._start_fit_worker(task, options)
         captured = self._captured(task, solution)
         capture_seconds = time.monotonic() - start
         if isinstance(captured, Evaluation):
@@ -378,14 +378,17 @@ class EvaluationSlot:
             evaluation.artifacts["captured"] = data
         return evaluation
 
-    def _start_fit_worker(self, task: str, key: str) -> None:
-        """Start a fit worker for ``key`` (task and options) unless one runs; do not wait."""
+    def _start_fit_worker(self, task: str, options: str) -> None:
+        """Start a fit worker for ``task`` and its ``options`` (JSON) unless one runs; do not
+        wait (it warms up while the capture runs)."""
+        key = f"{task}\n{options}"
         if self._fit is not None and self._fit[0] == key and self._fit[1].alive:
             return
         if self._fit is not None:
             self._fit[1].close()
         env = worker_environment(self.limits, self.extra_python_path)
-        command = [sys.executable, "-m", "sga_agent.fit_worker", task, str(self.limits.memory_mb)]
+        command = [sys.executable, "-m", "sga_agent.fit_worker", task,
+                   str(self.limits.memory_mb), options]  # fmt: skip
         self._fit = (key, _LineProcess(command, env, self._folder, "fit"))
         self._fit_ready = False
 

@@ -174,6 +174,11 @@ class Task(Protocol):
     ``Literal`` of strings (optionally ``| None``), and whose ``__post_init__`` raises
     ``ValueError`` for a bad value. ``--option KEY=VALUE`` is checked against it before
     anything runs; ``EvaluationSettings.options`` then holds the given options, typed.
+
+    Two optional methods warm the helper processes before their first candidate:
+    ``warm_up_solutions() -> list[str]`` (captured when a capture server starts; default: the
+    seed) and ``warm_up_fit(options: dict)`` (run by a fit worker once it is ready, with the
+    options its evaluations will use: load data, compile kernels; it runs no candidate code).
     """
 
     name: str

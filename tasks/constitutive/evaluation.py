@@ -15,7 +15,7 @@ import torch
 
 import taichi_mpm as tm
 from bridges import laws as torch_laws
-from bridges.rollout import LawError, Rollout
+from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
 from taichi_mpm import runtime
@@ -62,6 +62,24 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
     return law.requires_grad_(False)
 
 
+def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
+    """Load the ground truth and run the bridge's kernels once, both serial and batched (a
+    known plastic law with an SVD, forward and backward, on a few segments), so that the first
+    evaluation pays for neither loading nor compiling them."""
+    ensure_runtime(options.precision or "float32")
+    dtype = torch_dtype()
+    observed = ground_truth(spec, options.steps)
+    segments = min(len(observed.states["x"]), 5)
+    steps = min(segments * spec.reset_every, observed.positions.shape[0] - 1)
+    scene = tm.paper_scene(steps=steps)
+    plastic = torch_laws.VonMises(yield_stress=KNOWN_ELASTIC.E * 1e-3, E=KNOWN_ELASTIC.E,
+                                  nu=KNOWN_ELASTIC.nu, dtype=dtype)  # fmt: skip
+    rollout = Rollout(scene, plastic, known_elastic_law(dtype))
+    for batch in (1, segments):
+        trajectory_loss(rollout, observed.positions[: steps + 1], observed.states,
+                        spec.reset_every, batch=batch)  # fmt: skip
+
+
 def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) -> Evaluation:
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
@@ -89,6 +107,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         learning_rate=settings.learning_rate or spec.learning_rate,
         reset_every=spec.reset_every,
         optimizer=options.optimizer or spec.optimizer,
+        graph_memory_mb=options.graph_memory_mb,
     )
     try:
         result = optimize(rollout, law, observed, inner)

@@ -41,8 +41,7 @@ class InnerSettings:
     ``clip_norm`` are unused (its steps come from the line search).
 
     The teacher-forced segments of an epoch run as batches of scene copies, as many at a time
-    as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand, with the laws
-    recomputed during backward where that fits more; at least one).
+    as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand; at least one).
     """
 
     epochs: int = 30
@@ -50,7 +49,7 @@ class InnerSettings:
     clip_norm: float = 1.0
     reset_every: int = 100
     optimizer: str = "adam"
-    graph_memory_mb: float = 100.0
+    graph_memory_mb: float = 250.0
 
     def __post_init__(self) -> None:
         if self.optimizer not in OPTIMIZERS:
@@ -200,20 +199,10 @@ class _Fit:
         return run.loss
 
     def _segments_per_batch(self) -> int:
-        """Segments per batch within the graph budget; where the laws' intermediates keep it
-        from batching every segment, they are recomputed during backward if that fits more."""
         start = State.from_arrays(self.observed.states, 0, self.rollout.dtype)
         self.rollout.check_laws(start)  # a law of the wrong shape is reported as such
         budget = int(self.settings.graph_memory_mb * 2**20)
-        segment, segments = self.settings.reset_every, len(self.observed.states["x"])
-        self.rollout.recompute_laws = False
-        batch = segments_per_batch(self.rollout, start, segment, budget)
-        if batch < segments:
-            self.rollout.recompute_laws = True
-            recomputed = segments_per_batch(self.rollout, start, segment, budget)
-            self.rollout.recompute_laws = recomputed > batch
-            batch = max(batch, recomputed)
-        return batch
+        return segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
 
 
 def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> None:

@@ -53,6 +53,12 @@ class ConstitutiveTask:
 
         return [self.spec.seed, WARM_UP_LAW]
 
+    def warm_up_fit(self, options: dict[str, Any]) -> None:
+        """Ground truth and every kernel an evaluation launches, loaded before the first one."""
+        from tasks.constitutive.evaluation import warm_up
+
+        warm_up(self.spec, ConstitutiveOptions(**options))
+
     def capture(self, solution: str) -> dict[str, Any]:
         """The law's graph (runs its code: capture process only)."""
         from tasks.constitutive.law_capture import capture_law

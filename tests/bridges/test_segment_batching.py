@@ -107,23 +107,6 @@ def test_a_law_that_mixes_particles_is_refused(law):
         trajectory_loss(rollout, observed, segment=3)
 
 
-@pytest.mark.parametrize("name", ["von_mises", "mixture"])
-def test_recomputing_the_laws_in_backward_changes_nothing(name):
-    material = MATERIALS[name]
-    scene, observed, resets = _observation(material)
-    results = []
-    for recompute in (False, True):
-        plastic, elastic = from_material(material, dtype=torch.float64)
-        rollout = Rollout(scene, plastic, elastic)
-        rollout.recompute_laws = recompute
-        result = trajectory_loss(rollout, observed, resets, segment=SEGMENT, batch=2)
-        results.append((result.loss, parameter_gradients(plastic, elastic)))
-    (loss, expected), (recomputed_loss, got) = results
-    assert recomputed_loss == loss
-    for parameter, value in expected.items():
-        assert got[parameter] == pytest.approx(value, rel=1e-12, abs=1e-300), parameter
-
-
 def test_the_batch_size_follows_the_measured_graph_memory():
     material = MATERIALS["von_mises"]
     scene, _, resets = _observation(material)
@@ -134,5 +117,3 @@ def test_the_batch_size_follows_the_measured_graph_memory():
     per_segment = 2**40 // one
     assert segments_per_batch(rollout, start, SEGMENT, 3 * per_segment + 1) == 3
     assert segments_per_batch(rollout, start, SEGMENT, 0) == 1
-    rollout.recompute_laws = True
-    assert segments_per_batch(rollout, start, SEGMENT, 3 * per_segment + 1) > 3

@@ -57,6 +57,28 @@ class ExecTask:
         )
 
 
+class WarmingTask(ExecTask):
+    """:class:`ExecTask` whose fit worker warms up first; its evaluations report the options
+    the warm-up was given and the fit worker's process id."""
+
+    warmed_with: dict[str, Any] | None = None
+
+    def warm_up_fit(self, options: dict[str, Any]) -> None:
+        WarmingTask.warmed_with = options
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        evaluation = super().evaluate(data, settings)
+        evaluation.extras.update(warmed_with=WarmingTask.warmed_with, fit_pid=os.getpid())
+        return evaluation
+
+
+class FailingWarmUpTask(ExecTask):
+    """:class:`ExecTask` whose fit warm-up raises."""
+
+    def warm_up_fit(self, options: dict[str, Any]) -> None:
+        raise RuntimeError("no data to load")
+
+
 class ExecLawTask(ExecTask):
     """:class:`ExecTask` for solutions that pass the search's static checks of an equation
     (a ``Physics`` module, torch imports), as ``sga-agent evaluate`` applies them."""

@@ -271,6 +271,24 @@ def test_pool_keeps_its_helpers_warm():
     assert second.extras["capture_seconds"] < first.extras["capture_seconds"]
 
 
+def test_the_fit_worker_warms_up_once_before_its_first_candidate():
+    task = "tests.sga_agent.doubles:WarmingTask"
+    with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        first, second = pool.map(task, ["loss = 1.0\n", "loss = 2.0\n"], SETTINGS)
+    assert first.extras["warmed_with"] == {} == second.extras["warmed_with"]
+    assert first.extras["fit_pid"] == second.extras["fit_pid"]
+
+
+def test_a_failing_warm_up_leaves_the_evaluations_to_run():
+    evaluation = sandboxed("loss = 0.25\n", task="tests.sga_agent.doubles:FailingWarmUpTask")
+    assert evaluation.status == "ok" and evaluation.loss == 0.25
+
+
+def test_threads_are_the_cores_shared_by_the_workers(monkeypatch):
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    assert [sandbox.threads_per_worker(n) for n in (1, 2, 3, 8, 16)] == [8, 4, 2, 1, 1]
+
+
 def test_pool_defaults_to_one_worker_per_core():
     with SandboxPool() as pool:
         assert pool.max_workers == os.cpu_count()

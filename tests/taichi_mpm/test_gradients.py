@@ -89,6 +89,7 @@ def test_initial_velocity_gradient_matches_finite_differences():
         )
 
 
+@pytest.mark.slow  # compiles the parallel variant of every kernel: minutes
 def test_parallel_loops_give_the_serial_results():
     """The parallel forward kernel and parallel reverse kernels agree with the serial ones."""
     scene, material = impact_scene(), MATERIALS["von_mises"]
