@@ -55,7 +55,7 @@ def capture(task: str, folder: Path) -> Path:
     return path
 
 
-def run_one(task: str, epochs: int, profile: bool, graph: Path) -> dict:
+def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -> dict:
     """Evaluate in this process (called in a child); returns the measurements."""
     import torch
 
@@ -69,17 +69,19 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path) -> dict:
     ensure_runtime("float32")
     baseline_mb = _resident_mb()  # torch, Taichi and the project imported, Taichi started
     data = json.loads(graph.read_text())  # the law's graph: what the fit worker receives
-    evaluator.evaluate(data, EvaluationSettings(epochs=1))  # compile every kernel, ground truth
+    # compile every kernel, load the ground truth
+    evaluator.evaluate(data, EvaluationSettings(epochs=1, options=options))
     started = time.perf_counter()
     if profile:
         import cProfile
         import pstats
 
         profiler = cProfile.Profile()
-        result = profiler.runcall(evaluator.evaluate, data, EvaluationSettings(epochs=epochs))
+        settings = EvaluationSettings(epochs=epochs, options=options)
+        result = profiler.runcall(evaluator.evaluate, data, settings)
         pstats.Stats(profiler, stream=sys.stderr).sort_stats("tottime").print_stats(15)
     else:
-        result = evaluator.evaluate(data, EvaluationSettings(epochs=epochs))
+        result = evaluator.evaluate(data, EvaluationSettings(epochs=epochs, options=options))
     seconds = time.perf_counter() - started
     return {
         "task": task,
@@ -107,10 +109,13 @@ def _resident_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path) -> dict:
+def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
+             graph_memory_mb: float | None) -> dict:  # fmt: skip
     """Our evaluation of ``task`` in a fresh process with ``threads`` threads."""
     command = [sys.executable, __file__, "--child", task, "--epochs", str(epochs),
                "--graph", str(graph)]  # fmt: skip
+    if graph_memory_mb is not None:
+        command += ["--graph-memory-mb", str(graph_memory_mb)]
     if profile:
         command.append("--profile")
     env = os.environ | {"OMP_NUM_THREADS": str(threads), "TI_CPU_MAX_NUM_THREADS": str(threads)}
@@ -166,24 +171,28 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=threads_per_worker(1),
                         help="our threads (torch and Taichi); default: what sga-agent evaluate "
                         "gives one evaluation, the machine's cores")  # fmt: skip
+    parser.add_argument("--graph-memory-mb", type=float,
+                        help="our task option graph_memory_mb (default: the task's)")  # fmt: skip
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--graph", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph)))
+        options = {} if args.graph_memory_mb is None else {"graph_memory_mb": args.graph_memory_mb}
+        print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph, options)))
         return
     if args.original:
         prepare_original(args)
     folder = Path(tempfile.mkdtemp(prefix="evaluate-speed-"))
     graphs = {task: capture(task, folder) for task in args.tasks}
     for task in args.tasks:  # fills Taichi's kernel cache and the ground truth: no round compiles
-        run_ours(task, 1, False, args.threads, graphs[task])
+        run_ours(task, 1, False, args.threads, graphs[task], args.graph_memory_mb)
     load_before = os.getloadavg()
     started = time.perf_counter()
     runs: dict[tuple[str, str], list[dict]] = {}
     for round_index in range(args.rounds):
         for task in args.tasks:
-            ours = run_ours(task, args.epochs, args.profile, args.threads, graphs[task])
+            ours = run_ours(task, args.epochs, args.profile, args.threads, graphs[task],
+                            args.graph_memory_mb)  # fmt: skip
             runs.setdefault(("ours", task), []).append(ours)
             if args.original:
                 runs.setdefault(("original", task), []).append(
