@@ -162,6 +162,19 @@ class HelperFailure(RuntimeError):
     """A capture server or fit worker did not start, died or stopped answering."""
 
 
+#: Every helper process started and not yet reaped, so that an interrupted caller can kill
+#: them (a set changes atomically under the GIL: no lock, which a signal handler could not take).
+_RUNNING: set[_LineProcess] = set()
+
+
+def kill_every_helper() -> None:
+    """SIGKILL every capture server and fit worker this process started (and their process
+    groups): the last resort of an interrupted search, safe to call from a signal handler."""
+    for helper in list(_RUNNING):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(helper.process.pid, signal.SIGKILL)
+
+
 class _LineProcess:
     """A helper process answering one JSON line per JSON line sent; its log in a file."""
 
@@ -177,6 +190,7 @@ class _LineProcess:
                 env=env,
                 start_new_session=True,
             )
+        _RUNNING.add(self)
         self._pending = bytearray()
 
     def ask(self, message: dict[str, Any] | None, timeout_s: float) -> dict[str, Any]:
@@ -248,6 +262,7 @@ class _LineProcess:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.process.pid, signal.SIGKILL)
         self.process.wait()
+        _RUNNING.discard(self)
         for stream in (self.process.stdin, self.process.stdout):
             if stream is not None:
                 with contextlib.suppress(OSError):
@@ -271,6 +286,7 @@ class EvaluationSlot:
         self._capture: tuple[str, _LineProcess] | None = None
         self._fit: tuple[str, _LineProcess] | None = None
         self._fit_ready = False
+        self._stopped = False
 
     def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
         """Capture then fit one solution; every failure is an invalid Evaluation.
@@ -301,6 +317,14 @@ class EvaluationSlot:
         self._capture = self._fit = None
         shutil.rmtree(self._folder, ignore_errors=True)
 
+    def kill(self) -> None:
+        """Kill the helper processes now and start no new ones: an evaluation running in
+        another thread ends at once, invalid ("the pool was stopped")."""
+        self._stopped = True
+        for helper in (self._capture, self._fit):
+            if helper is not None:
+                helper[1].kill()
+
     # ------------------------------------------------------------------ capture
 
     def _captured(self, task: str, solution: str) -> dict[str, Any] | Evaluation:
@@ -329,6 +353,8 @@ class EvaluationSlot:
             return self._capture[1]
         if self._capture is not None:
             self._capture[1].kill()
+        if self._stopped:
+            raise HelperFailure("the pool was stopped")
         env = worker_environment(SandboxLimits(threads=1), self.extra_python_path)
         for name in CACHE_VARIABLES:  # a capture needs no cache: it finds none
             env.pop(name, None)
@@ -386,6 +412,9 @@ class EvaluationSlot:
             return
         if self._fit is not None:
             self._fit[1].close()
+        if self._stopped:
+            self._fit = None
+            return
         env = worker_environment(self.limits, self.extra_python_path)
         command = [sys.executable, "-m", "sga_agent.fit_worker", task,
                    str(self.limits.memory_mb), options]  # fmt: skip
@@ -394,7 +423,8 @@ class EvaluationSlot:
 
     def _ready_fit_worker(self) -> _LineProcess:
         """The started fit worker, once it has said it is ready."""
-        assert self._fit is not None
+        if self._fit is None:
+            raise HelperFailure("the pool was stopped")
         worker = self._fit[1]
         if not self._fit_ready:
             try:  # not ready: a task that cannot load, each answer says why
@@ -608,11 +638,28 @@ class SandboxPool:
         for evaluator in self._evaluators:
             evaluator.close()
 
+    def terminate(self) -> None:
+        """Stop now: cancel queued evaluations, kill the running ones' helper processes and
+        wait for their threads (which then end at once). Futures of evaluations that were
+        running hold invalid evaluations ("the pool was stopped" or a killed helper): a caller
+        that terminates must not record them."""
+        self._executor.shutdown(wait=False, cancel_futures=True)
+        for evaluator in self._evaluators:
+            evaluator.kill()
+        self._executor.shutdown(wait=True)
+        for evaluator in self._evaluators:
+            evaluator.close()
+
     def __enter__(self) -> SandboxPool:
         return self
 
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: type[BaseException] | None, *exc_info: object) -> None:
+        """Wait for running evaluations after a normal exit; after an exception (Ctrl-C, a
+        stopped search) terminate instead."""
+        if exc_type is None:
+            self.close()
+        else:
+            self.terminate()
 
     def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
         evaluator = self._slots.get()

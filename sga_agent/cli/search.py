@@ -10,6 +10,7 @@ from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
+from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
 from sga_agent.cli.options import registered_task, task_options, typed_task_options
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
@@ -143,10 +144,14 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
         console.print(f"run folder: {store.path}")
+    resume = f"`sga-agent resume {store.path}` continues the run"
     try:
-        with SearchProgress(console, config) as progress:
+        with interrupts_stop_the_search(), SearchProgress(console, config) as progress:
             result = runner.run(config, store, progress, proposer)
     except (RayUnavailableError, ProposerError) as error:  # no cluster, no model: stop
-        resume = f"`sga-agent resume {store.path}` continues the run"
         raise click.ClickException(f"{error}\n{resume}") from error
+    except KeyboardInterrupt:
+        finished = len(store.recorded().evaluations)
+        click.echo(f"interrupted: {finished} finished evaluations are recorded; {resume}", err=True)
+        raise SystemExit(INTERRUPTED) from None
     print_result(console, store, result, as_json)
