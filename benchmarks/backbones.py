@@ -1,6 +1,6 @@
 """Table 1 across proposers: the same preset with several LLM backbones (or LLM-free proposers).
 
-A grid of tasks x proposers x seeds, one search run per cell in ``--out``; then ``table.md`` and
+A grid of tasks x proposers x seeds, one search run per cell in ``--out-dir``; then ``table.md`` and
 ``table.csv`` (mean ± std of the final best loss per task and proposer), ``ranks.csv`` and
 ``ranks.png`` (rank per task and mean rank, as the paper's Figure 4). Run from the repository
 root, with the providers' keys in the environment::
@@ -59,7 +59,7 @@ def method(spec: str, preset: str) -> Method:
 @grid_options(default_out="bench/backbones")
 def main(models: list[str], preset: str, **options) -> None:
     """Run every proposer in --models on every task and seed with one preset, then write
-    table.md, table.csv, ranks.csv and ranks.png into --out."""  # fmt: skip
+    table.md, table.csv, ranks.csv and ranks.png into --out-dir."""  # fmt: skip
     if not models:
         raise click.BadParameter("name at least one proposer", param_hint="'--models'")
     run_benchmark([method(spec, preset) for spec in models], **options)

@@ -1,6 +1,6 @@
 """Table 1 across presets: SGA, its ablations and the baselines, with one proposer.
 
-A grid of tasks x presets x seeds, one search run per cell in ``--out``; then ``table.md`` and
+A grid of tasks x presets x seeds, one search run per cell in ``--out-dir``; then ``table.md`` and
 ``table.csv`` (mean ± std of the final best loss per task and preset), ``ranks.csv`` and
 ``ranks.png``. Run from the repository root, with the provider's key in the environment::
 
@@ -41,7 +41,7 @@ TABLE_1 = ("sga", "no-bilevel", "no-exploit", "cot", "funsearch", "eureka", "opr
 @grid_options(default_out="bench/presets")
 def main(model: str, presets: list[str], **options) -> None:
     """Run every preset in --presets with --model on every task and seed, then write
-    table.md, table.csv, ranks.csv and ranks.png into --out."""  # fmt: skip
+    table.md, table.csv, ranks.csv and ranks.png into --out-dir."""  # fmt: skip
     if not presets:
         raise click.BadParameter("name at least one preset", param_hint="'--presets'")
     run_benchmark([Method(preset, model, preset) for preset in presets], **options)

@@ -14,6 +14,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from sga_agent.sandbox import SandboxLimits
+
 #: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off. All but
 #: "quick" are the columns of the paper's Table 1; "quick" is the default of the LLM-free
 #: built-in proposers: a short run (25 candidates, 5 inner epochs) that shows the pipeline.
@@ -97,8 +99,8 @@ class SearchConfig:
     learning_rate: float | None = None
     task_options: dict[str, Any] = field(default_factory=dict)
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
-    timeout_s: float = 900.0
-    memory_mb: int = 4096
+    timeout_s: float = SandboxLimits.timeout_s
+    memory_mb: int = SandboxLimits.memory_mb
     max_usd: float | None = None
     max_tokens: int | None = None
     max_evaluations: int | None = None

@@ -128,6 +128,7 @@ class Search:
             stopped = self._budget_exceeded()
             if stopped:
                 break
+            self._emit({"type": "iteration_started", "iteration": iteration})
             shown = self.heap.top(self.config.top_k)
             messages = build_messages(
                 self.task.kind,

@@ -162,6 +162,13 @@ def options_type(task: object) -> type:
     return getattr(task, "options_type", NoOptions)
 
 
+def solution_with_parameters(task: object, solution: str, parameters: dict[str, float]) -> str:
+    """``solution`` with its fitted ``parameters`` written in, where ``task`` knows how (its
+    ``solution_with_parameters``); else ``solution`` unchanged."""
+    write = getattr(task, "solution_with_parameters", None)
+    return write(solution, parameters) if write is not None and parameters else solution
+
+
 @runtime_checkable
 class Task(Protocol):
     """A scientific problem the search can work on.
@@ -179,6 +186,10 @@ class Task(Protocol):
     ``warm_up_solutions() -> list[str]`` (captured when a capture server starts; default: the
     seed) and ``warm_up_fit(options: dict)`` (run by a fit worker once it is ready, with the
     options its evaluations will use: load data, compile kernels; it runs no candidate code).
+
+    ``solution_with_parameters(solution: str, parameters: dict) -> str``, also optional,
+    writes fitted parameter values into a solution for people to read (the end of a search,
+    reports); it must not run the solution's code.
     """
 
     name: str

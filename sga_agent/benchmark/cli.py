@@ -101,7 +101,7 @@ def grid_options(default_out: str) -> Callable[[Callable[..., Any]], Callable[..
                      help="Registered tasks, comma-separated (see `sga-agent tasks`)."),
         click.option("--seeds", default="0", show_default=True, callback=parse_seeds,
                      metavar="0,1,2", help="Seeds, comma-separated: one run per seed."),
-        click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+        click.option("--out-dir", "out", type=click.Path(file_okay=False, path_type=Path),
                      default=Path(default_out), show_default=True,
                      help="Output folder: cells in <task>/<method>/seed-<n>/, then the tables "
                      "and ranks.png. Running again skips finished cells, resumes the others."),

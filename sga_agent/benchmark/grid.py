@@ -248,7 +248,7 @@ def cell_run(cell: Cell) -> RunStore | None:
     if different:
         raise GridError(
             f"{store.path} was run with other settings ({'; '.join(different)}); use another "
-            "--out, or delete that folder to run the cell again"
+            "--out-dir, or delete that folder to run the cell again"
         )
     return store
 

@@ -1,9 +1,10 @@
-"""Live progress of a search and its final table (rich)."""
+"""Live progress of a search and its final screen (rich)."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from typing import Any
 
 import click
@@ -13,26 +14,50 @@ from rich.syntax import Syntax
 from rich.table import Table
 
 from sga_agent.config import SearchConfig
-from sga_agent.run_store import RunStore
-from sga_agent.search import SearchResult
+from sga_agent.run_store import Recorded, RunStore
+from sga_agent.runner import BUILTIN, REPLAY_PREFIX
+from sga_agent.search import SEED, SearchResult
+from sga_agent.task import Evaluation, solution_with_parameters
+
+
+def uses_a_model(config: SearchConfig) -> bool:
+    """Whether the run's proposer is an LLM (so tokens and money are worth showing)."""
+    return not config.proposer.startswith((BUILTIN, REPLAY_PREFIX))
+
+
+def _loss(value: float) -> str:
+    return f"{value:.4g}" if math.isfinite(value) else "-"
 
 
 class SearchProgress:
-    """A progress bar over every candidate of the run, with the best loss and the spend."""
+    """A progress bar over every candidate of the run: the iteration running, candidates done
+    out of all, the time, then the best loss, how many failed and (with a model) the spend.
 
-    def __init__(self, console: Console, config: SearchConfig) -> None:
+    The count and the clock come before the status text, so that a narrow terminal cuts the
+    status, not them. A resumed run starts from what its folder holds.
+    """
+
+    def __init__(
+        self, console: Console, config: SearchConfig, recorded: Recorded | None = None
+    ) -> None:
         self.progress = Progress(
             TextColumn("[bold]{task.description}"),
-            BarColumn(),
+            BarColumn(bar_width=16),
             MofNCompleteColumn(),
-            TextColumn("{task.fields[status]}"),
             TimeElapsedColumn(),
+            TextColumn("{task.fields[status]}"),
             console=console,
         )
+        self.config = config
+        self.spend = uses_a_model(config)
+        done = list((recorded or Recorded()).evaluations.values())
+        self.best = min((e.loss for e in done if e.valid), default=math.inf)
+        self.failed = sum(not e.valid for e in done)
         total = 1 + config.iterations * config.offspring
-        self.bar = self.progress.add_task("seed", total=total, status="")
-        self.best = math.inf
-        self.iteration = 0
+        description = "resuming" if done else "seed"
+        self.bar = self.progress.add_task(
+            description, total=total, completed=len(done), status=self._status(None)
+        )
 
     def __enter__(self) -> SearchProgress:
         self.progress.start()
@@ -42,48 +67,91 @@ class SearchProgress:
         self.progress.stop()
 
     def __call__(self, event: dict[str, Any]) -> None:
-        totals = event["totals"]
         kind = event["type"]
         if kind == "evaluation":
-            loss = float(event["evaluation"]["loss"])  # "inf" for invalid candidates
-            self.best = min(self.best, loss)
+            evaluation = event["evaluation"]
+            if evaluation["valid"]:
+                self.best = min(self.best, float(evaluation["loss"]))
+            else:
+                self.failed += 1
             self.progress.advance(self.bar)
-        elif kind == "iteration_done":
-            self.iteration = event["iteration"]
         elif kind == "proposal_missing":
+            self.failed += 1
             self.progress.advance(self.bar)
-        best = f"{self.best:.4g}" if math.isfinite(self.best) else "-"
-        self.progress.update(
-            self.bar,
-            description=f"iteration {self.iteration}" if self.iteration else "seed",
-            status=(
-                f"best {best}  valid {totals.valid}  invalid {totals.invalid}  "
-                f"tokens {totals.tokens}  ${totals.cost_usd:.4f}"
-            ),
-        )
+        elif kind == "iteration_started":
+            description = f"iteration {event['iteration']}/{self.config.iterations}"
+            self.progress.update(self.bar, description=description)
+        elif kind == "run_finished":
+            self.progress.update(self.bar, description="done")
+        self.progress.update(self.bar, status=self._status(event.get("totals")))
+
+    def _status(self, totals: Any) -> str:
+        status = f"best {_loss(self.best)}  failed {self.failed}"
+        if self.spend and totals is not None:
+            status += f"  {totals.tokens} tokens  ${totals.cost_usd:.3f}"
+        return status
 
 
-def print_result(console: Console, store: RunStore, result: SearchResult, as_json: bool) -> None:
-    """The top-K table (or the run summary as JSON)."""
+def print_result(
+    console: Console,
+    store: RunStore,
+    result: SearchResult,
+    as_json: bool,
+    task: object,
+    config: SearchConfig,
+) -> None:
+    """The final screen: the top-K table, the best solution against the seed, the best
+    solution with its fitted constants, the counts by status and the report command (or the
+    run summary as JSON)."""
     summary = json.loads((store.path / "summary.json").read_text(encoding="utf-8"))
     summary["run"] = str(store.path)
     if as_json:
         click.echo(json.dumps(summary))
         return
-    table = Table("rank", "candidate", "loss", title=f"top {len(result.top)}")
+    recorded = store.recorded().evaluations
+    seed = recorded.get(SEED)
+    table = Table("rank", "candidate", "loss", "x below the seed", title=f"top {len(result.top)}")
     for rank, entry in enumerate(result.top, 1):
         loss = f"{entry.loss:.6g}" if math.isfinite(entry.loss) else "invalid"
-        table.add_row(str(rank), entry.candidate, loss)
+        table.add_row(str(rank), entry.candidate, loss, _ratio(seed, entry.loss))
     console.print(table)
     best = result.best
     if best is not None and best.valid:
-        path = store.path / "candidates" / best.candidate / "code.py"
-        console.print(f"best: {best.candidate}, loss {best.loss:.6g} ({path})")
-        console.print(Syntax(best.code, "python", theme="ansi_dark", word_wrap=True))
-    totals = result.totals
-    console.print(
-        f"{totals.evaluations} evaluations ({totals.valid} valid, {totals.invalid} invalid), "
-        f"{totals.tokens} tokens, ${totals.cost_usd:.4f}"
-        + (f"; stopped: {result.stopped}" if result.stopped else "")
-    )
-    console.print(f"run folder: {store.path}")
+        console.print(_comparison(best.candidate, best.loss, seed))
+        if best.parameters:
+            console.print("its code, with the fitted constants written in:")
+        code = solution_with_parameters(task, best.code, best.parameters)
+        console.print(Syntax(code, "python", theme="ansi_dark", word_wrap=True))
+    else:
+        console.print("no valid solution was found")
+    console.print(_counts(recorded.values(), result, uses_a_model(config)))
+    console.print(f"report: sga-agent report {store.path}", soft_wrap=True)
+
+
+def _ratio(seed: Evaluation | None, loss: float) -> str:
+    if seed is None or not seed.valid or not math.isfinite(loss) or loss <= 0:
+        return "-"
+    ratio = seed.loss / loss
+    return f"{ratio:.2f}" if ratio < 10 else f"{ratio:.3g}"
+
+
+def _comparison(candidate: str, loss: float, seed: Evaluation | None) -> str:
+    """One line: the best loss, the seed's and their ratio."""
+    line = f"best: {candidate}, loss {loss:.4g}"
+    if candidate == SEED:
+        return line + " (the seed: no candidate did better)"
+    if seed is None or not seed.valid:
+        return line + " (the seed had no valid loss)"
+    return line + f", {_ratio(seed, loss)}x below the seed's {seed.loss:.4g}"
+
+
+def _counts(evaluations: Any, result: SearchResult, spend: bool) -> str:
+    """Evaluations by status (duplicates of earlier code not counted), then the spend."""
+    statuses = Counter(e.status for e in evaluations if "duplicate_of" not in e.extras)
+    parts = ", ".join(f"{count} {status}" for status, count in statuses.most_common())
+    text = f"{sum(statuses.values())} evaluations ({parts})"
+    if spend:
+        text += f", {result.totals.tokens} tokens, ${result.totals.cost_usd:.4f}"
+    if result.stopped:
+        text += f"; stopped: {result.stopped}"
+    return text

@@ -10,10 +10,19 @@ from sga_agent.cli import main
 from sga_agent.run_store import RunStoreError
 
 
+def _say(text: str) -> None:
+    click.echo(f"{text}...", err=True)
+
+
 @main.command()
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for the report (default: RUN_DIR/report).")  # fmt: skip
+@click.option(
+    "--out-dir",
+    "out",
+    type=click.Path(file_okay=False, path_type=Path),
+    show_default="RUN_DIR/report",
+    help="Folder for the report.",
+)
 @click.option(
     "--no-motion",
     is_flag=True,
@@ -29,7 +38,7 @@ def report(run_dir: Path, out: Path | None, no_motion: bool) -> None:
     from sga_agent.report import build_report
 
     try:
-        paths = build_report(run_dir, out, motion=not no_motion)
+        paths = build_report(run_dir, out, motion=not no_motion, say=_say)
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
     for path in paths:

@@ -38,5 +38,7 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
         resumed["ray_address"] = ray_address
     check_executor(config)
     proposer = make_proposer(config)
+    if store.recorded().finished:
+        click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
     store.append(resumed)
     execute(config, store, as_json, proposer)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import os
+import dataclasses
 from pathlib import Path
+from typing import Any
 
 import click
 from rich.console import Console
@@ -20,6 +21,19 @@ from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunStore, RunStoreError
 
 
+def default(name: str) -> Any:
+    """The default of a :class:`SearchConfig` field (the CLI's defaults are the config's)."""
+    found = SearchConfig.__dataclass_fields__[name]
+    if found.default_factory is not dataclasses.MISSING:
+        return found.default_factory()
+    return found.default
+
+
+def from_preset(name: str) -> str:
+    """How a preset-dependent default reads in the help: "5 (sga), 4 (quick)"."""
+    return f"{PRESETS['sga'][name]} (sga), {PRESETS['quick'][name]} (quick)"
+
+
 # fmt: off
 @main.command()
 @click.option("--task", "task", required=True, callback=registered_task, metavar="NAME",
@@ -28,54 +42,64 @@ from sga_agent.run_store import RunStore, RunStoreError
               help="litellm model string, e.g. openai/gpt-4o, anthropic/claude-3-5-sonnet-"
               "20240620, hosted_vllm/NAME (the key comes from the provider's environment "
               "variable: OPENAI_API_KEY, ANTHROPIC_API_KEY, ...), or builtin (the task's "
-              "LLM-free proposer: builtin:gp for laws, builtin:ga for molecules). Default: "
-              "builtin.")
+              "LLM-free proposer: builtin:gp for laws, builtin:ga for molecules).",
+              show_default="builtin")
 @click.option("--api-base", metavar="URL", help="Base URL of an OpenAI-compatible server.")
 @click.option("--replay", type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="Re-run a recorded search: its model answers, no model call.")
 @click.option("--preset", type=click.Choice(list(PRESETS)),
+              show_default="sga with a model, quick without",
               help="Settings of a column of the paper's Table 1, or quick (overridden by the "
-              "options). Default: sga with a model, quick with a built-in proposer.")
-@click.option("--iterations", type=click.IntRange(min=1), help="Outer iterations.")
-@click.option("--top-k", type=click.IntRange(min=1), help="Solutions shown per prompt (K).")
-@click.option("--exploit", type=click.IntRange(min=0), help="Offspring per iteration at T_l.")
-@click.option("--explore", type=click.IntRange(min=0), help="Offspring per iteration at T_h.")
+              "options).")
+@click.option("--iterations", type=click.IntRange(min=1), show_default=from_preset("iterations"),
+              help="Outer iterations.")
+@click.option("--top-k", type=click.IntRange(min=1), show_default=from_preset("top_k"),
+              help="Solutions shown per prompt (K).")
+@click.option("--exploit", type=click.IntRange(min=0), show_default=from_preset("exploit"),
+              help="Offspring per iteration at T_l.")
+@click.option("--explore", type=click.IntRange(min=0), show_default=from_preset("explore"),
+              help="Offspring per iteration at T_h.")
 @click.option("--t-exploit", "exploit_temperature", type=click.FloatRange(0, 2),
-              help="Exploit temperature T_l [0.5].")
+              show_default=str(default("exploit_temperature")), help="Exploit temperature T_l.")
 @click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
-              help="Explore temperature T_h [1.0].")
+              show_default=str(default("explore_temperature")), help="Explore temperature T_h.")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
               help="Do not fit parameters: evaluate the proposed defaults.")
-@click.option("--epochs", type=click.IntRange(min=0), help="Inner-optimization epochs.")
+@click.option("--epochs", type=click.IntRange(min=0), show_default="the task's; 5 in quick",
+              help="Inner-optimization epochs.")
 @click.option("--lr", "learning_rate", type=click.FloatRange(min=0, min_open=True),
-              help="Inner-optimization learning rate.")
+              show_default="the task's", help="Inner-optimization learning rate.")
 @click.option("--option", "task_options", multiple=True, callback=task_options,
               metavar="KEY=VALUE", help="Task option, repeatable (e.g. steps=200); unknown keys "
               "and bad values are usage errors.")
-@click.option("--workers", type=click.IntRange(min=1), default=os.cpu_count() or 1,
-              show_default=True, help="Candidates evaluated at once (one process each).")
-@click.option("--timeout", "timeout_s", type=click.FloatRange(min=1), default=900.0,
+@click.option("--workers", type=click.IntRange(min=1), default=default("workers"),
+              show_default="CPU cores", help="Candidates evaluated at once (one process each).")
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=1), default=default("timeout_s"),
               show_default=True, help="Wall-clock limit of one evaluation (s).")
-@click.option("--memory-mb", type=click.IntRange(min=64), default=4096, show_default=True,
-              help="Memory limit of one evaluation (MiB).")
-@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
+@click.option("--memory-mb", type=click.IntRange(min=64), default=default("memory_mb"),
+              show_default=True, help="Memory limit of one evaluation (MiB).")
+@click.option("--executor", type=click.Choice(EXECUTORS), default=default("executor"),
+              show_default=True,
               help="Where candidates are evaluated: this machine's pool of sandboxed worker "
               "processes, or a Ray cluster (each evaluation a Ray task running the same "
               f"sandboxed worker on a node; needs `{RAY_INSTALL}`).")
 @click.option("--ray-address", metavar="HOST:PORT",
+              show_default="a private local Ray instance of --workers CPUs",
               help="Head node of the Ray cluster (the port of `ray start --head`), or auto "
-              "(RAY_ADDRESS, else a cluster started on this machine). Default: a private "
-              "local Ray instance of --workers CPUs.")
+              "(RAY_ADDRESS, else a cluster started on this machine).")
 @click.option("--ray-cpus", "ray_cpus_per_task", type=click.FloatRange(min=0, min_open=True),
-              help="CPUs each evaluation reserves on its Ray node [1].")
-@click.option("--ray-memory-mb", type=click.IntRange(min=1),
-              help="Memory each evaluation reserves on its Ray node, MiB [none].")
+              show_default=str(default("ray_cpus_per_task")),
+              help="CPUs each evaluation reserves on its Ray node.")
+@click.option("--ray-memory-mb", type=click.IntRange(min=1), show_default="none",
+              help="Memory each evaluation reserves on its Ray node, MiB.")
 @click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the run.")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"),
-              show_default=True, help="Parent folder of the run folder.")
+@click.option("--seed", type=int, default=default("seed"), show_default=True,
+              help="Seed of the run.")
+@click.option("--out-dir", "out", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("runs"), show_default=True,
+              help="Folder in which the run folder (TASK-DATE-TIME) is made.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
 # fmt: on
 def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings) -> None:
@@ -143,10 +167,14 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
     """Run with a progress display, then print the result."""
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
-        console.print(f"run folder: {store.path}")
+        console.print(f"run folder: {store.path}", soft_wrap=True)
     resume = f"`sga-agent resume {store.path}` continues the run"
+    recorded = store.recorded()
     try:
-        with interrupts_stop_the_search(), SearchProgress(console, config) as progress:
+        with (
+            interrupts_stop_the_search(),
+            SearchProgress(console, config, recorded) as progress,
+        ):
             result = runner.run(config, store, progress, proposer)
     except (RayUnavailableError, ProposerError) as error:  # no cluster, no model: stop
         raise click.ClickException(f"{error}\n{resume}") from error
@@ -154,4 +182,5 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
         finished = len(store.recorded().evaluations)
         click.echo(f"interrupted: {finished} finished evaluations are recorded; {resume}", err=True)
         raise SystemExit(INTERRUPTED) from None
-    print_result(console, store, result, as_json)
+    task = registry.load_task(config.task)
+    print_result(console, store, result, as_json, task, config)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 from sga_agent.report import pictures, plots
@@ -51,7 +52,9 @@ def outcomes_table(run: Run) -> Table:
     return Table(["iteration", *STATUSES, "total"], rows)
 
 
-def task_section(run: Run, folder: Path, motion: bool) -> Section | None:
+def task_section(
+    run: Run, folder: Path, motion: bool, say: Callable[[str], None]
+) -> Section | None:
     """The task-specific pictures; None for a task without any. Failures become a note."""
     family, best = pictures.task_family(run.task), run.best
     if family == "constitutive":
@@ -60,6 +63,8 @@ def task_section(run: Run, folder: Path, motion: bool) -> Section | None:
             return Section(title, [Text("Skipped (`--no-motion`).")])
         if best is None:
             return Section(title, [Text("Skipped: no candidate was scored.")])
+        say("simulating the best law for the motion pictures (the first run compiles "
+            "Taichi's kernels: up to a minute)")  # fmt: skip
         try:
             png, gif = pictures.plot_motion(run, best, folder)
         except Exception as error:  # any failure of the re-simulation only loses this picture
@@ -72,6 +77,7 @@ def task_section(run: Run, folder: Path, motion: bool) -> Section | None:
     if family == "molecules":
         title = f"Top {TOP} molecules"
         top = run.ranked()[:TOP]
+        say("drawing the top molecules")
         try:
             png = pictures.plot_molecules(top, folder / "molecules.png")
         except Exception as error:  # a SMILES RDKit cannot read only loses this picture
@@ -80,16 +86,24 @@ def task_section(run: Run, folder: Path, motion: bool) -> Section | None:
     return None
 
 
-def build_report(run_dir: Path, out: Path | None = None, motion: bool = True) -> list[Path]:
-    """Write the report of the run in ``run_dir`` into ``out`` (default ``run_dir/report``).
+def build_report(
+    run_dir: Path,
+    out: Path | None = None,
+    motion: bool = True,
+    say: Callable[[str], None] = lambda text: None,
+) -> list[Path]:
+    """Write the report of the run in ``run_dir`` into ``out`` (default ``run_dir/report``);
+    ``say`` is told what each slow step is doing before it starts.
 
     Returns the paths written: ``report.md``, ``report.html`` and the figures.
     """
+    say(f"reading the run in {run_dir}")
     run = read_run(run_dir)
     folder = Path(out) if out is not None else run.path / "report"
     folder.mkdir(parents=True, exist_ok=True)
     label = pictures.loss_label(run.task)
     top = run.ranked()[:TOP]
+    say("plotting the losses")
     figures = [
         plots.plot_best_loss(run, folder / "best_loss.png", label),
         plots.plot_outcomes(run, folder / "outcomes.png"),
@@ -111,7 +125,7 @@ def build_report(run_dir: Path, out: Path | None = None, motion: bool = True) ->
             Code(best.code, "python"), Text("Feedback:"), Code(best.feedback),
         ] if best else [Text("No candidate was scored.")]),
     ]  # fmt: skip
-    extra = task_section(run, folder, motion)
+    extra = task_section(run, folder, motion, say)
     if extra is not None:
         sections.append(extra)
         figures += [folder / b.file for b in extra.blocks if isinstance(b, Image)]

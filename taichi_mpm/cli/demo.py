@@ -123,7 +123,7 @@ def demo(material: str, steps: int, frames: int, out: Path, arch: str, precision
     backend = start_taichi(console, arch, precision)
     with console.status(
         f"Simulating [bold]{material}[/]: {scene.num_particles} particles, {steps} steps "
-        f"({backend}, {precision})...",
+        f"({backend}, {precision}); the first run compiles the kernels (about a minute)...",
         spinner="dots",
     ):
         positions = tm.Simulator(scene, make_material(material)).forward(step_indices)

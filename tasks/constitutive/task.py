@@ -70,6 +70,16 @@ class ConstitutiveTask:
 
         return evaluate(self.spec, data, settings)
 
+    def solution_with_parameters(self, solution: str, parameters: dict[str, float]) -> str:
+        """The law's code with its fitted constants as its parameters' defaults (parsed only),
+        without the genetic programming's genome tag, which still holds the proposed ones."""
+        from tasks.constitutive.fitted_code import with_fitted_values
+        from tasks.constitutive.gp.codegen import GENOME_TAG
+
+        lines = solution.splitlines(keepends=True)
+        untagged = "".join(line for line in lines if not line.startswith(GENOME_TAG))
+        return with_fitted_values(untagged, parameters)
+
     def builtin_proposer(self) -> BuiltinProposer:
         """Genetic programming over law code (no model needed)."""
         from tasks.constitutive.gp import GeneticProgrammingProposer

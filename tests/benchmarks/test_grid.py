@@ -89,13 +89,13 @@ def event_logs(out: Path) -> dict[Path, bytes]:
 def test_backbones_grid_writes_table_and_chart_and_resumes(tmp_path, registered):
     recorded = tmp_path / "recorded"  # the runs replayed below: one per task and seed
     result = script("backbones", "--tasks", TASKS, "--models", "builtin", "--preset", "cot",
-                    "--seeds", "0,1", "--out", str(recorded), env=registered)  # fmt: skip
+                    "--seeds", "0,1", "--out-dir", str(recorded), env=registered)  # fmt: skip
     assert result.returncode == 0, result.stderr
 
     out = tmp_path / "bench"
     args = ["--tasks", TASKS, "--models", f"builtin,replay:{recorded}", "--preset", "quick",
             "--set", "iterations=2", "--seeds", "0,1", "--parallel", "2",
-            "--out", str(out)]  # fmt: skip
+            "--out-dir", str(out)]  # fmt: skip
     result = script("backbones", *args, env=registered)
     assert result.returncode == 0, result.stderr
     assert "8 cells: 0 finished (skipped), 0 to resume, 8 to start; 2 at once" in result.stderr
@@ -157,7 +157,7 @@ def test_backbones_grid_writes_table_and_chart_and_resumes(tmp_path, registered)
 def test_presets_grid_runs_each_preset_with_one_proposer(tmp_path, registered):
     out = tmp_path / "presets"
     args = ["--tasks", "number-a", "--model", "builtin", "--presets", "quick,cot",
-            "--set", "iterations=1", "--out", str(out)]  # fmt: skip
+            "--set", "iterations=1", "--out-dir", str(out)]  # fmt: skip
     result = script("presets", *args, env=registered)
     assert result.returncode == 0, result.stderr
     assert "| task | seeds | quick | cot |" in (out / "table.md").read_text()
@@ -195,7 +195,7 @@ def test_presets_grid_runs_each_preset_with_one_proposer(tmp_path, registered):
     ],
 )  # fmt: skip
 def test_bad_input_is_a_usage_error_naming_the_fix(tmp_path, registered, name, args, fragment):
-    result = CliRunner().invoke(load_script(name).main, [*args, "--out", str(tmp_path)])
+    result = CliRunner().invoke(load_script(name).main, [*args, "--out-dir", str(tmp_path)])
     assert result.exit_code == 2, result.output
     assert fragment in result.output
     assert not any(tmp_path.iterdir())  # nothing ran

@@ -141,7 +141,7 @@ def test_evaluate_usage_errors_exit_2(tmp_path, monkeypatch, args, fragment):
 
 
 def test_a_task_named_by_its_description_is_suggested(tmp_path):
-    result = CliRunner().invoke(main, ["search", "--task", "sand", "--out", str(tmp_path)])
+    result = CliRunner().invoke(main, ["search", "--task", "sand", "--out-dir", str(tmp_path)])
     assert result.exit_code == 2, result.output
     assert "no task named 'sand'" in result.output and "Did you mean 'granular'?" in result.output
     assert not any(tmp_path.iterdir())
@@ -155,7 +155,7 @@ def test_version():
 
 def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkeypatch):
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
-    args = ["search", "--task", "granular", "--model", "openai/gpt-4o", "--out", str(tmp_path)]
+    args = ["search", "--task", "granular", "--model", "openai/gpt-4o", "--out-dir", str(tmp_path)]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 1, result.output
     assert result.output == "Error: no API key for openai/gpt-4o: set OPENAI_API_KEY\n"

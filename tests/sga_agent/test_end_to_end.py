@@ -74,7 +74,7 @@ def search_command(out: Path, *source: str) -> list[str]:
         sys.executable, "-m", "sga_agent", "search", "--task", "elastic", *source,
         "--iterations", "1", "--exploit", "2", "--explore", "4", "--top-k", "3",
         "--epochs", "1", "--option", "steps=100", "--workers", "2", "--timeout", "300",
-        "--out", str(out), "--json",
+        "--out-dir", str(out), "--json",
     ]  # fmt: skip
 
 

@@ -89,7 +89,7 @@ def held_task(tmp_path):
 def start_search(out: Path, env: dict[str, str]) -> subprocess.Popen:
     command = [sys.executable, "-m", "sga_agent", "search", "--task", "held", "--model",
                "builtin", "--iterations", "2", "--exploit", "1", "--explore", "2",
-               "--workers", "1", "--out", str(out)]  # fmt: skip
+               "--workers", "1", "--out-dir", str(out)]  # fmt: skip
     return subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
         start_new_session=True,
@@ -181,4 +181,6 @@ def test_a_second_interrupt_exits_at_once(tmp_path, held_task):
     seconds, stderr = stop(process, signals=2)
     assert seconds < 5, f"the search took {seconds:.1f} s to stop"
     assert helpers_left(temporary) == []
-    assert process.returncode == 130, stderr[-3000:]
+    # 130 from the handler, or killed by SIGINT itself when the second one lands while the
+    # interpreter is already exiting (its handlers are reset then): the shell shows 130 both ways
+    assert process.returncode in (130, -signal.SIGINT), stderr[-3000:]

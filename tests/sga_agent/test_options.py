@@ -72,7 +72,7 @@ def test_a_task_without_options_takes_none():
     ],
 )
 def test_search_refuses_bad_options_before_anything_runs(tmp_path, option, message):
-    args = ["search", "--task", "granular", "--option", option, "--out", str(tmp_path)]
+    args = ["search", "--task", "granular", "--option", option, "--out-dir", str(tmp_path)]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 2, result.output
     assert "Invalid value for '--option'" in result.output and message in result.output

@@ -319,7 +319,7 @@ def test_the_ray_executor_without_ray_is_a_usage_error_naming_the_install(tmp_pa
     program = "import sys; sys.modules['ray'] = None; from sga_agent.cli import main; main()"
     run = subprocess.run(
         [sys.executable, "-c", program, "search", "--task", "elastic", "--executor", "ray",
-         "--out", str(tmp_path)],
+         "--out-dir", str(tmp_path)],
         capture_output=True, text=True, timeout=120,
         env={**os.environ, "LITELLM_LOCAL_MODEL_COST_MAP": "True"},
     )  # fmt: skip

@@ -90,6 +90,9 @@ def test_molecule_report_draws_the_top_three(tmp_path):
     assert "## Top 3 molecules" in (folder / "report.md").read_text()
     assert '<img src="molecules.png"' in (folder / "report.html").read_text()
     assert png_size(folder / "molecules.png") == (3 * 450, 400)  # three 450x400 drawings
+    said = result.stderr.splitlines()  # what each slow step is doing, before it starts
+    assert said[0] == f"reading the run in {store.path}..."
+    assert said[1:] == ["plotting the losses...", "drawing the top molecules..."]
 
 
 def test_motion_picture_is_drawn_from_the_fit_artifact_never_from_code(tmp_path):

@@ -1,0 +1,110 @@
+"""The search's progress bar and final screen, rendered by rich at 80 and 120 columns."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import re
+from concurrent.futures import Future
+
+import pytest
+from rich.console import Console
+
+from sga_agent.cli.progress import SearchProgress, print_result
+from sga_agent.run_store import RunStore
+from sga_agent.search import Search, Totals
+from sga_agent.task import Evaluation
+from tasks.constitutive.task import ElasticTask
+from tests.sga_agent.test_search import LAW, FakeTask, Scripted, config
+
+WIDTHS = (80, 120)
+
+
+def console(width: int) -> Console:
+    return Console(file=io.StringIO(), width=width, record=True, color_system=None)
+
+
+def bar_line(progress: SearchProgress, width: int) -> str:
+    """The progress bar as it is drawn at ``width`` columns (one line)."""
+    screen = console(width)
+    screen.print(progress.progress.get_renderable())
+    lines = screen.export_text().rstrip("\n").splitlines()
+    assert len(lines) == 1, lines
+    assert len(lines[0]) <= width
+    return lines[0]
+
+
+def evaluation_event(loss: float, valid: bool = True) -> dict:
+    return {"type": "evaluation", "evaluation": {"valid": valid, "loss": loss}}
+
+
+def feed(progress: SearchProgress, *events: dict, totals: Totals | None = None) -> None:
+    for event in events:
+        progress({**event, "totals": totals or Totals()})
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_bar_shows_the_running_iteration_the_count_and_the_clock(width):
+    cfg = config(proposer="builtin", iterations=4, exploit=1, explore=2)
+    progress = SearchProgress(console(width), cfg)
+    feed(progress, evaluation_event(100.0), {"type": "iteration_started", "iteration": 1})
+    line = bar_line(progress, width)
+    assert line.startswith("iteration 1/4")  # not "seed" while iteration 1 runs
+    assert "1/13" in line and re.search(r"\d:\d\d:\d\d", line)
+    feed(progress, evaluation_event(3.5), evaluation_event(float("inf"), valid=False))
+    line = bar_line(progress, width)
+    assert "3/13" in line and "best 3.5" in line and "failed 1" in line
+    assert "tokens" not in line and "$" not in line  # no model, no spend
+
+
+def test_with_a_model_the_bar_shows_the_spend():
+    cfg = config(proposer="openai/gpt-4o", iterations=4, exploit=1, explore=2)
+    progress = SearchProgress(console(120), cfg)
+    feed(progress, evaluation_event(1.0), totals=Totals(tokens=1234, cost_usd=0.5))
+    assert "1234 tokens  $0.500" in bar_line(progress, 120)
+
+
+def test_a_resumed_run_counts_from_what_its_folder_holds(tmp_path):
+    cfg = config(iterations=1, exploit=1, explore=1)
+    store = RunStore.create(tmp_path, cfg, {})
+    finished = {"00-seed": Evaluation(True, 100.0, "fine"),
+                "01-exploit-00": Evaluation(True, 7.0, "fine"),
+                "01-explore-00": Evaluation.invalid("broken")}  # fmt: skip
+    for candidate, evaluation in finished.items():
+        store.append(
+            {"type": "evaluation", "candidate": candidate, "evaluation": evaluation.to_dict()}
+        )
+    progress = SearchProgress(console(80), cfg, store.recorded())
+    line = bar_line(progress, 80)
+    assert line.startswith("resuming") and "3/3" in line
+    assert "best 7" in line and "failed 1" in line
+
+
+class FittedScale:
+    """Evaluator double: the loss written in the code, and a fitted ``scale`` of 2.5."""
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        future: Future[Evaluation] = Future()
+        loss = float(re.search(r"loss ([-\d.e+]+)", solution).group(1))
+        future.set_result(Evaluation(True, loss, "fitted", parameters={"scale": 2.5}))
+        return future
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_final_screen_compares_with_the_seed_and_shows_the_fitted_law(tmp_path, width):
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    answers = [LAW.format(value=10.0), "no code in this answer"]
+    result = Search(cfg, FakeTask(), Scripted(answers), FittedScale(), store).run()
+    screen = console(width)
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    text = screen.export_text()
+
+    assert "best: 01-exploit-00, loss 10, 10x below the seed's 100" in text
+    assert "scale: float = 2.5" in text and "scale: float = 1.0" not in text
+    assert "3 evaluations (2 ok, 1 invalid)" in text
+    assert "tokens" not in text
+    assert f"report: sga-agent report {store.path}\n" in text  # one line, whatever the width
+    for line in text.splitlines():
+        if not line.startswith(("report:", "run folder:")):
+            assert len(line) <= width, line
