@@ -13,6 +13,7 @@ from typing import Any
 
 from sga_agent import registry
 from sga_agent.config import SearchConfig
+from sga_agent.events import SandboxReady
 from sga_agent.proposers.base import Proposer
 from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
@@ -92,13 +93,13 @@ def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
     )
 
 
-def pool_record(pool: SandboxPool | RayPool) -> dict[str, Any]:
-    """The run's ``sandbox`` event: how workers are isolated and where they run."""
+def pool_record(pool: SandboxPool | RayPool) -> SandboxReady:
+    """The run's sandbox event: how workers are isolated and where they run."""
     if isinstance(pool, RayPool):
         where = pool.describe()
     else:
         where = {"executor": "local", "workers": pool.max_workers}
-    return {"type": "sandbox", "isolation": dataclasses.asdict(pool.isolation()), **where}
+    return SandboxReady(dataclasses.asdict(pool.isolation()), where)
 
 
 def run(

@@ -15,6 +15,7 @@ from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.fingerprint import fingerprint
 from sga_agent.heap import Entry, SolutionHeap
@@ -121,7 +122,7 @@ class Search:
             The proposer failed in a way that asking again cannot fix (no API key, nothing at
             the address, an unknown model); the run stays resumable, without a summary.
         """
-        self._emit({"type": "search_started", "resumed": bool(self._evaluations)})
+        self._emit(ev.SearchStarted(resumed=bool(self._evaluations)))
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
         for iteration in range(1, self.config.iterations + 1):
@@ -141,12 +142,12 @@ class Search:
             )
             top = [entry.summary() for entry in self.heap.top(self.config.top_k)]
             self.store.save_heap(iteration, top)
-            self._emit({"type": "iteration_done", "iteration": iteration, "top": top})
+            self._emit(ev.IterationDone(iteration, top))
             if stopped:
                 break
         result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.config.top_k))
         self.store.save_summary(self._summary(result))
-        self._emit({"type": "run_finished", "stopped": stopped})
+        self._emit(ev.RunFinished(stopped))
         return result
 
     # ------------------------------------------------------------------ proposals
@@ -179,9 +180,9 @@ class Search:
                 data = proposal.to_dict()
                 self._answers[candidate] = data
                 self.store.save_proposal(candidate, messages, data)
-                self._emit({"type": "proposal", "candidate": candidate, "proposal": data})
+                self._emit(ev.ProposalReceived(candidate, data))
             for candidate in candidates[len(new) :]:
-                self._emit({"type": "proposal_missing", "candidate": candidate})
+                self._emit(ev.ProposalMissing(candidate))
         answers = []
         for candidate, _ in slots:
             if candidate in self._answers:
@@ -196,8 +197,8 @@ class Search:
     def _ask(self, messages, parents, temperature: float, n: int, seed: int) -> list[Proposal]:
         proposer = self.proposer
         if proposer is None:
-            self._emit({"type": "proposer_error", "error": "the answer is not in the replayed "
-                        "run and no model is configured"})  # fmt: skip
+            error = "the answer is not in the replayed run and no model is configured"
+            self._emit(ev.ProposerFailed(error, transient=True))
             return []
         try:
             if isinstance(proposer, BuiltinProposer):
@@ -205,9 +206,7 @@ class Search:
                 return [Proposal(text, proposer.name, temperature) for text in texts[:n]]
             return list(proposer.propose(messages, temperature, n))[:n]
         except ProposerError as error:
-            self._emit(
-                {"type": "proposer_error", "error": str(error), "transient": error.transient}
-            )
+            self._emit(ev.ProposerFailed(str(error), error.transient))
             if not error.transient:
                 raise
             return []
@@ -271,7 +270,7 @@ class Search:
         self._evaluations[candidate] = evaluation
         self.store.save_evaluation(candidate, code, evaluation)
         event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
-        self._emit({"type": "evaluation", "candidate": candidate, "evaluation": event})
+        self._emit(ev.CandidateEvaluated(candidate, event))
 
     def _push(self, candidate: str, code: str, key: str, evaluation: Evaluation) -> None:
         """Count the evaluation and push it onto the heap.
@@ -301,9 +300,11 @@ class Search:
             return f"max_evaluations={cfg.max_evaluations} reached"
         return ""
 
-    def _emit(self, event: dict[str, Any]) -> None:
-        self.store.append(event)
-        self.on_event({**event, "totals": self.totals})
+    def _emit(self, event: ev.Event) -> None:
+        """Record ``event``, then show it (as its dict, with the totals) to ``on_event``."""
+        data = event.to_dict()
+        self.store.append(data)
+        self.on_event({**data, "totals": self.totals})
 
     def _summary(self, result: SearchResult) -> dict[str, Any]:
         best = result.best
