@@ -19,7 +19,7 @@ from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.fingerprint import fingerprint
 from sga_agent.heap import Entry, SolutionHeap
-from sga_agent.parsing import CodeRejected, check_code, parse_response
+from sga_agent.parsing import CodeRejected, check_candidate, parse_response
 from sga_agent.prompting import Shown, build_messages
 from sga_agent.proposers.base import Proposal, Proposer, ProposerError
 from sga_agent.run_store import RunStore
@@ -68,8 +68,8 @@ class Search:
     ----------
     config : SearchConfig
     task : Task
-        The task object (only its kind, seed and prompt parts are used here; evaluation
-        happens in the evaluator's workers).
+        The task object (only its kind, seed, prompt parts and solution checks are used here;
+        evaluation happens in the evaluator's workers).
     proposer : Proposer or BuiltinProposer, optional
         Asked for answers not recorded yet: a model (given the prompt) or a task's LLM-free
         proposer (given the top-K parents); None when every answer must come from
@@ -218,7 +218,7 @@ class Search:
             reason = "the answer has no ```python code block; put the code in one block"
             return proposal["text"], Evaluation.invalid(reason)
         try:
-            check_code(parsed.code, self.task.kind)
+            check_candidate(parsed.code, self.task)
         except CodeRejected as error:
             return parsed.code, Evaluation.invalid(f"the code was rejected before it ran: {error}")
         return parsed.code, None
