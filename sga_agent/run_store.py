@@ -4,9 +4,10 @@ Layout of ``runs/<id>/``::
 
     config.json            the resolved SearchConfig
     events.jsonl           one JSON object per line, flushed and fsynced per event
-    candidates/<id>/       messages.json, response.txt, proposal.json, code.py,
-                           evaluation.json, feedback.txt, curves.json, artifacts.json (what
-                           the trusted fit left: the captured data, the best trajectory)
+    candidates/<id>/       messages.json (the prompt, when the proposer read it),
+                           response.txt, proposal.json, code.py, evaluation.json,
+                           feedback.txt, curves.json, artifacts.json (what the trusted fit
+                           left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
     summary.json           written when the run ends
 
