@@ -3,7 +3,7 @@
 :func:`parse_response` splits an answer into its sections ("### Analysis", "### Step-by-Step
 Plan", "### Code") and takes the last python code block. :func:`check_code` inspects that code
 through its syntax tree only (nothing is executed) and raises :class:`CodeRejected`, whose
-message is feedback for the next prompt, when it breaks a rule:
+message is feedback for the next prompt, when it breaks a generic safety rule:
 
 - imports only from the allowed top-level modules (torch, math and numpy for equation tasks,
   none for entity tasks), never from :data:`FORBIDDEN_MODULES`;
@@ -11,10 +11,12 @@ message is feedback for the next prompt, when it breaks a rule:
   and ``getattr``/``setattr``/``delattr``/``hasattr`` only with a literal attribute name;
 - no dunder attributes besides ``__init__``, no private attributes of imported modules, and no
   attribute that loads, saves or compiles code or data (:data:`FORBIDDEN_ATTRIBUTES`), nor one
-  named like a forbidden module (``torch.os``);
-- per kind, the shape the prompt asks for: one class ``Physics(nn.Module)`` with defaulted
-  ``__init__`` arguments and ``forward(self, F)`` (equation), or literal assignments of
-  ``SMILES`` and ``coordinates`` and nothing else (entity).
+  named like a forbidden module (``torch.os``).
+
+The shape a solution must have (a ``Physics`` module, a molecule's literals, ...) is the task's
+business: a task may define ``check_solution(code)``, which raises :class:`CodeRejected` too.
+:func:`check_candidate` runs both, as the search and ``sga-agent evaluate`` do, and reports
+their problems together.
 
 These checks give fast, readable feedback and stop obvious hostility; they are not the
 security boundary, which is the sandboxed worker that evaluates a candidate.
@@ -25,8 +27,10 @@ from __future__ import annotations
 import ast
 import re
 import warnings
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
+
+from sga_agent.task import Task
 
 #: Imports allowed by default, per task kind (top-level module names).
 DEFAULT_IMPORTS: dict[str, tuple[str, ...]] = {
@@ -65,12 +69,13 @@ _ALLOWED_DUNDERS = frozenset({"__init__"})
 _CODE_TAGS = frozenset({"", "python", "python3", "py"})
 _SECTIONS = {"analysis": "analysis", "step-by-step plan": "plan", "step by step plan": "plan",
              "plan": "plan", "code": "code"}  # fmt: skip
-#: ``SMILES = "`` at a line start; read as a raw string when a backslash breaks the parse, as
-#: the molecule tasks do.
-_SMILES_LITERAL = re.compile(r"""^(\s*SMILES\s*(?::[^=\n]*)?=\s*)(["'])""", re.M)
+#: ``NAME = "`` (or ``NAME: T = "``) at a line start: such a literal is read as a raw string when
+#: a backslash breaks the parse (a SMILES's ``C\N``).
+_LITERAL_ASSIGNMENT = re.compile(r"""^(\s*[A-Za-z_]\w*\s*(?::[^=\n]*)?=\s*)(["'])""", re.M)
 _HEADING = re.compile(r"^ {0,3}#{1,6}\s+(?:\d+[.)]\s*)?(.*?)[\s#]*$")  # "## 2. Plan" too
 _MAX_PROBLEMS = 5
-CLASS_NAME = "Physics"
+#: A problem of the code: ``(line, sentence)``, line 0 when no line applies.
+Problem = tuple[int, str]
 
 
 @dataclass(frozen=True)
@@ -91,7 +96,17 @@ class ParsedResponse:
 
 
 class CodeRejected(ValueError):
-    """The code breaks a rule; the message says which and where, for the next prompt."""
+    """The code breaks a rule; the message says which and where, for the next prompt.
+
+    Raised with a message, or with ``(line, sentence)`` problems (kept in ``problems``), which
+    the message lists by line, up to five.
+    """
+
+    def __init__(self, problems: str | Sequence[Problem]) -> None:
+        self.problems: list[Problem] = (
+            [(0, problems)] if isinstance(problems, str) else list(problems)
+        )
+        super().__init__(_report(self.problems))
 
 
 def parse_response(text: str) -> ParsedResponse:
@@ -142,15 +157,36 @@ def _closes(line: str, ticks: int) -> bool:
     return len(stripped) >= ticks and set(stripped) == {"`"}
 
 
+def check_candidate(code: str, task: Task) -> None:
+    """Check a solution for ``task`` statically: the generic rules of :func:`check_code`, then
+    the task's own ``check_solution(code)`` if it has one (code that does not parse is not
+    shown to it).
+
+    Raises
+    ------
+    CodeRejected
+        The problems of both checks together, listed by line.
+    """
+    problems = _problems(code, task.kind, None)
+    own = getattr(task, "check_solution", None)
+    if own is not None:
+        try:
+            own(code)
+        except CodeRejected as error:
+            problems += error.problems
+    if problems:
+        raise CodeRejected(problems)
+
+
 def check_code(code: str, kind: str, allowed_imports: Collection[str] | None = None) -> None:
-    """Check a solution's code statically, without running it.
+    """Check a solution's code against the generic rules, statically, without running it.
 
     Parameters
     ----------
     code : str
         The code block of an answer.
     kind : str
-        The task kind: ``"equation"`` (a ``Physics`` module) or ``"entity"`` (literal data).
+        The task kind, ``"equation"`` or ``"entity"``: picks the default imports.
     allowed_imports : collection of str, optional
         Top-level modules the code may import; default :data:`DEFAULT_IMPORTS` of ``kind``.
         :data:`FORBIDDEN_MODULES` stay forbidden even when listed.
@@ -163,27 +199,37 @@ def check_code(code: str, kind: str, allowed_imports: Collection[str] | None = N
     ValueError
         ``kind`` is unknown.
     """
+    problems = _problems(code, kind, allowed_imports)
+    if problems:
+        raise CodeRejected(problems)
+
+
+def _problems(code: str, kind: str, allowed_imports: Collection[str] | None) -> list[Problem]:
+    """What :func:`check_code` reports; raises :class:`CodeRejected` for invalid syntax."""
     if kind not in DEFAULT_IMPORTS:
         raise ValueError(f"kind must be one of {tuple(DEFAULT_IMPORTS)}, got {kind!r}")
     allowed = DEFAULT_IMPORTS[kind] if allowed_imports is None else tuple(allowed_imports)
-    tree = _parse(code, kind)
+    tree = parse_python(code)
     checker = _Checker(tree, allowed)
     checker.visit(tree)
-    problems = checker.problems
-    if kind == "equation":
-        problems += _check_equation(tree, checker.aliases)
-    else:
-        problems += _check_entity(tree)
-    if problems:
-        raise CodeRejected(_report(problems))
+    return checker.problems
 
 
-def _parse(code: str, kind: str) -> ast.Module:
-    """``ast.parse``, quietly; entity code may hold a SMILES with backslashes (``C\\N``)."""
+def parse_python(code: str) -> ast.Module:
+    """``ast.parse``, quietly (nothing is run).
+
+    A literal assigned at a line start whose backslash breaks the parse (a SMILES such as
+    ``"C/C=C\\N"``) is read as a raw string.
+
+    Raises
+    ------
+    CodeRejected
+        The code is not valid Python; the message names the line.
+    """
     attempts = [code]
-    raw = _SMILES_LITERAL.sub(r"\1r\2", code)
-    if kind == "entity" and raw != code:
-        attempts.append(raw)  # the SMILES literal read as a raw string
+    raw = _LITERAL_ASSIGNMENT.sub(r"\1r\2", code)
+    if raw != code:
+        attempts.append(raw)  # the literals read as raw strings
     errors: list[SyntaxError] = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", (DeprecationWarning, SyntaxWarning))
@@ -198,7 +244,7 @@ def _parse(code: str, kind: str) -> ast.Module:
     raise CodeRejected(f"{where}the code is not valid Python ({errors[0].msg})")
 
 
-def _report(problems: list[tuple[int, str]]) -> str:
+def _report(problems: list[Problem]) -> str:
     unique = sorted(set(problems), key=lambda problem: (problem[0] == 0, problem))
     lines = [f"line {line}: {text}" if line else text for line, text in unique[:_MAX_PROBLEMS]]
     if len(unique) > _MAX_PROBLEMS:
@@ -228,8 +274,8 @@ class _Checker(ast.NodeVisitor):
 
     def __init__(self, tree: ast.Module, allowed: tuple[str, ...]) -> None:
         self.allowed = allowed
-        self.problems: list[tuple[int, str]] = []
-        self.aliases = _aliases(tree)
+        self.problems: list[Problem] = []
+        self.aliases = import_aliases(tree)
         self.bound = _bound_names(tree)
 
     def reject(self, node: ast.AST, text: str) -> None:
@@ -302,7 +348,7 @@ class _Checker(ast.NodeVisitor):
             )
 
     def visit_Attribute(self, node: ast.Attribute) -> None:
-        private = node.attr.startswith("_") and _dotted(node, self.aliases) is not None
+        private = node.attr.startswith("_") and dotted_name(node, self.aliases) is not None
         if not _attribute_ok(node.attr) or private:
             self.reject(node, f"{_source(node)!r} is not allowed; " + _why(node.attr))
         else:
@@ -345,7 +391,7 @@ def _source(node: ast.expr) -> str:
     return text if len(text) <= 60 or not isinstance(node, ast.Attribute) else "." + node.attr
 
 
-def _aliases(tree: ast.Module) -> dict[str, str]:
+def import_aliases(tree: ast.Module) -> dict[str, str]:
     """Names bound by imports, mapped to the dotted path they stand for."""
     found = {}
     for node in ast.walk(tree):
@@ -377,7 +423,7 @@ def _bound_names(tree: ast.Module) -> set[str]:
     return bound
 
 
-def _dotted(node: ast.expr, aliases: dict[str, str]) -> str | None:
+def dotted_name(node: ast.expr, aliases: dict[str, str]) -> str | None:
     """``torch.nn.Module`` for an attribute chain rooted at an imported name, else None."""
     parts = []
     while isinstance(node, ast.Attribute):
@@ -386,134 +432,3 @@ def _dotted(node: ast.expr, aliases: dict[str, str]) -> str | None:
     if isinstance(node, ast.Name) and node.id in aliases:
         return ".".join([aliases[node.id], *reversed(parts)])
     return None
-
-
-def _check_equation(tree: ast.Module, aliases: dict[str, str]) -> Iterator[tuple[int, str]]:
-    """One class ``Physics(nn.Module)``, defaulted ``__init__``, ``forward(self, F)``."""
-    classes = {node.name: node for node in tree.body if isinstance(node, ast.ClassDef)}
-    found = [node for node in tree.body if isinstance(node, ast.ClassDef)]
-    found = [node for node in found if node.name == CLASS_NAME]
-    if not found:
-        text = f"the code defines no top-level class {CLASS_NAME!r}; define "
-        yield 0, text + f"class {CLASS_NAME}(nn.Module) as in the code template"
-        return
-    if len(found) > 1:
-        yield found[1].lineno, f"class {CLASS_NAME} is defined twice; define it exactly once"
-        return
-    lineage = _lineage(found[0], classes, aliases)
-    if lineage is None:
-        bases = ", ".join(ast.unparse(base) for base in found[0].bases) or "nothing"
-        text = f"class {CLASS_NAME} must derive from nn.Module (torch.nn.Module); it derives"
-        yield found[0].lineno, f"{text} from {bases}"
-        return
-    methods = {
-        node.name: node
-        for klass in reversed(lineage)
-        for node in klass.body
-        if isinstance(node, ast.FunctionDef)
-    }
-    missing = _required(methods["__init__"].args) if "__init__" in methods else []
-    if missing:
-        text = f"every argument of {CLASS_NAME}.__init__ besides self needs a default value"
-        text += f" (the starting value of the fit); missing for: {', '.join(missing)}"
-        yield methods["__init__"].lineno, text
-    if "forward" not in methods:
-        text = f"class {CLASS_NAME} defines no forward method; add forward(self, F)"
-        yield found[0].lineno, text + " as in the code template"
-        return
-    required = _required(methods["forward"].args)
-    if len(required) != 1 and not (methods["forward"].args.vararg and not required):
-        text = f"{CLASS_NAME}.forward must take exactly one required argument besides self,"
-        text += f" the input F; it requires {', '.join(required) or 'no argument'}"
-        yield methods["forward"].lineno, text
-
-
-def _required(args: ast.arguments) -> list[str]:
-    """Names of the arguments without a default value, the first (self) left out."""
-    positional = [*args.posonlyargs, *args.args][1:]
-    names = [a.arg for a in positional[: len(positional) - len(args.defaults)]]
-    return names + [
-        a.arg for a, d in zip(args.kwonlyargs, args.kw_defaults, strict=True) if d is None
-    ]
-
-
-def _lineage(
-    cls: ast.ClassDef, classes: dict[str, ast.ClassDef], aliases: dict[str, str]
-) -> list[ast.ClassDef] | None:
-    """``cls`` and its same-file base classes, if one of them derives from nn.Module."""
-    seen = [cls]
-    while True:
-        if any(_dotted(base, aliases) == "torch.nn.Module" for base in seen[-1].bases):
-            return seen
-        local = [b.id for b in seen[-1].bases if isinstance(b, ast.Name) and b.id in classes]
-        if not local or classes[local[0]] in seen:
-            return None
-        seen.append(classes[local[0]])
-
-
-def _check_entity(tree: ast.Module) -> Iterator[tuple[int, str]]:
-    """Only literal assignments, among them ``SMILES`` (str) and ``coordinates`` (rows)."""
-    example = 'e.g. SMILES = "CCO" and coordinates = [[0.0, 0.0, 0.0], ...]'
-    values: dict[str, tuple[int, object]] = {}
-    assigned: set[str] = set()
-    for node in tree.body:
-        if isinstance(node, ast.Import | ast.ImportFrom):
-            continue  # judged by the import rules
-        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
-            continue  # a docstring
-        assignment = _assignment(node)
-        if assignment is None:
-            text = "only assignments of literal values to plain names are allowed"
-            yield node.lineno, f"{text} ({example}); nothing else is run"
-            continue
-        names, value = assignment
-        assigned.update(names)
-        if isinstance(node, ast.AnnAssign) and not _plain_annotation(node.annotation):
-            yield node.lineno, "a type annotation may only name types, such as list[list[float]]"
-        try:
-            literal = ast.literal_eval(value)
-        except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
-            text = f"the value of {names[0]!r} must be a literal (numbers, strings, lists)"
-            yield node.lineno, f"{text}, without function calls, names or arithmetic"
-            continue
-        values.update({name: (node.lineno, literal) for name in names})
-    missing = [name for name in ("SMILES", "coordinates") if name not in assigned]
-    if missing:
-        yield 0, f"the code must assign {' and '.join(missing)} ({example})"
-    if "SMILES" in values and not isinstance(values["SMILES"][1], str):
-        yield values["SMILES"][0], "SMILES must be a string literal"
-    if "coordinates" in values and not _rows(values["coordinates"][1]):
-        text = "coordinates must be a non-empty list of rows of numbers, [[x, y, z], ...]"
-        yield values["coordinates"][0], text
-
-
-def _assignment(node: ast.stmt) -> tuple[list[str], ast.expr] | None:
-    """Names and value of ``a = b = value`` or ``a: T = value``; None for any other statement."""
-    if isinstance(node, ast.Assign):
-        targets, value = node.targets, node.value
-    elif isinstance(node, ast.AnnAssign) and node.value is not None:
-        targets, value = [node.target], node.value
-    else:
-        return None
-    names = [t.id for t in targets if isinstance(t, ast.Name)]
-    return (names, value) if len(names) == len(targets) else None
-
-
-_ANNOTATION_NODES = (ast.Name, ast.Attribute, ast.Subscript, ast.Tuple, ast.Constant, ast.BinOp,
-                     ast.BitOr, ast.Load)  # fmt: skip
-
-
-def _plain_annotation(node: ast.expr) -> bool:
-    return all(isinstance(child, _ANNOTATION_NODES) for child in ast.walk(node))
-
-
-def _number(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _rows(value: object) -> bool:
-    return (
-        isinstance(value, list | tuple)
-        and bool(value)
-        and all(isinstance(row, list | tuple) and row and all(map(_number, row)) for row in value)
-    )

@@ -4,9 +4,10 @@ Layout of ``runs/<id>/``::
 
     config.json            the resolved SearchConfig
     events.jsonl           one JSON object per line, flushed and fsynced per event
-    candidates/<id>/       messages.json, response.txt, proposal.json, code.py,
-                           evaluation.json, feedback.txt, curves.json, artifacts.json (what
-                           the trusted fit left: the captured data, the best trajectory)
+    candidates/<id>/       messages.json (the prompt, when the proposer read it),
+                           response.txt, proposal.json, code.py, evaluation.json,
+                           feedback.txt, curves.json, artifacts.json (what the trusted fit
+                           left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
     summary.json           written when the run ends
 
@@ -25,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.task import Evaluation
 
@@ -77,7 +79,7 @@ class RunStore:
         path.mkdir(parents=True)
         store = cls(path)
         _dump(path / CONFIG, {"config": config.to_dict(), **meta})
-        store.append({"type": "run_started", **meta})
+        store.append(ev.RunStarted(meta))
         return store
 
     @classmethod
@@ -96,13 +98,15 @@ class RunStore:
 
     # ------------------------------------------------------------------ events
 
-    def append(self, event: dict[str, Any]) -> None:
-        """Append one event durably (flushed and fsynced before returning).
+    def append(self, event: ev.Event | dict[str, Any]) -> None:
+        """Append one event (an :class:`~sga_agent.events.Event` or its dict) durably (flushed
+        and fsynced before returning).
 
         After a kill mid-write the log may end in a partial line: the event then starts on a
         line of its own, so the partial line alone is lost (and skipped when read back).
         """
-        line = json.dumps({"time": time.time(), **event}, default=_json_default)
+        data = event.to_dict() if isinstance(event, ev.Event) else event
+        line = json.dumps({"time": time.time(), **data}, default=_json_default)
         with open(self.path / EVENTS, "a+b") as log:
             if log.tell() > 0:
                 log.seek(-1, os.SEEK_END)
@@ -127,11 +131,11 @@ class RunStore:
         recorded = Recorded()
         for event in self.events():
             kind = event.get("type")
-            if kind == "proposal":
+            if kind == ev.ProposalReceived.type:
                 recorded.proposals[event["candidate"]] = event["proposal"]
-            elif kind == "evaluation":
+            elif kind == ev.CandidateEvaluated.type:
                 recorded.evaluations[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
-            elif kind == "run_finished":
+            elif kind == ev.RunFinished.type:
                 recorded.finished = True
         return recorded
 

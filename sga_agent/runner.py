@@ -13,12 +13,15 @@ from typing import Any
 
 from sga_agent import registry
 from sga_agent.config import SearchConfig
+from sga_agent.events import SandboxReady
 from sga_agent.proposers.base import Proposer
+from sga_agent.proposers.builtin import BuiltinAdapter
+from sga_agent.proposers.replay import ReplayProposer
 from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool, threads_per_worker
 from sga_agent.search import Search, SearchResult
-from sga_agent.task import BuiltinProposer, Task
+from sga_agent.task import Task
 
 REPLAY_PREFIX = "replay:"
 BUILTIN = "builtin"
@@ -28,29 +31,36 @@ class ProposerChoiceError(ValueError):
     """The requested proposer does not exist for this task."""
 
 
-def make_proposer(config: SearchConfig, task: Task) -> Proposer | BuiltinProposer | None:
+def make_proposer(config: SearchConfig, task: Task) -> Proposer:
     """The proposer ``config.proposer`` names: a litellm model, the task's built-in
-    (LLM-free) proposer ("builtin" or its name, e.g. "builtin:gp"), or None for a replay."""
+    (LLM-free) proposer ("builtin" or its name, e.g. "builtin:gp"), or the answers of a
+    recorded run ("replay:RUN_DIR").
+
+    Raises
+    ------
+    ProposerChoiceError
+        The task has no such built-in proposer.
+    sga_agent.run_store.RunStoreError
+        The replayed folder is not a run folder.
+    """
     if config.proposer.startswith(REPLAY_PREFIX):
-        return None
+        return ReplayProposer(Path(config.proposer[len(REPLAY_PREFIX) :]))
     if config.proposer == BUILTIN or config.proposer.startswith(BUILTIN + ":"):
         factory = getattr(task, "builtin_proposer", None)
         if factory is None:
             raise ProposerChoiceError(f"task {task.name!r} has no built-in proposer; use --model")
-        proposer = factory()
-        if config.proposer not in (BUILTIN, proposer.name):
+        builtin = factory()
+        if config.proposer not in (BUILTIN, builtin.name):
             raise ProposerChoiceError(
-                f"task {task.name!r} offers {proposer.name!r}, not {config.proposer!r}"
+                f"task {task.name!r} offers {builtin.name!r}, not {config.proposer!r}"
             )
-        return proposer
+        return BuiltinAdapter(builtin)
     from sga_agent.proposers.litellm_backbone import BackboneSettings, LiteLLMProposer
 
     return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
 
 
-def with_preferred_options(
-    config: SearchConfig, proposer: Proposer | BuiltinProposer | None
-) -> SearchConfig:
+def with_preferred_options(config: SearchConfig, proposer: Proposer) -> SearchConfig:
     """``config`` with the task options a built-in proposer is meant to run with (its
     ``task_options``, e.g. the constitutive GP's ``{"optimizer": "lbfgs"}``) added; options
     the config sets already win."""
@@ -61,11 +71,11 @@ def with_preferred_options(
 
 
 def replayed_answers(config: SearchConfig) -> dict[str, dict[str, Any]]:
-    """Recorded model answers of the run named by a ``replay:RUN_DIR`` proposer."""
+    """Recorded answers of the run a ``replay:RUN_DIR`` proposer names (empty for another
+    proposer); raises :class:`~sga_agent.run_store.RunStoreError` for a bad folder."""
     if not config.proposer.startswith(REPLAY_PREFIX):
         return {}
-    source = RunStore.open(Path(config.proposer[len(REPLAY_PREFIX) :]))
-    return source.recorded().proposals
+    return ReplayProposer(Path(config.proposer[len(REPLAY_PREFIX) :])).answers
 
 
 def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
@@ -92,26 +102,27 @@ def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
     )
 
 
-def pool_record(pool: SandboxPool | RayPool) -> dict[str, Any]:
-    """The run's ``sandbox`` event: how workers are isolated and where they run."""
+def pool_record(pool: SandboxPool | RayPool) -> SandboxReady:
+    """The run's sandbox event: how workers are isolated and where they run."""
     if isinstance(pool, RayPool):
         where = pool.describe()
     else:
         where = {"executor": "local", "workers": pool.max_workers}
-    return {"type": "sandbox", "isolation": dataclasses.asdict(pool.isolation()), **where}
+    return SandboxReady(dataclasses.asdict(pool.isolation()), where)
 
 
 def run(
     config: SearchConfig,
     store: RunStore,
     on_event: Callable[[dict[str, Any]], None] | None = None,
-    proposer: Proposer | BuiltinProposer | None = None,
+    proposer: Proposer | None = None,
 ) -> SearchResult:
-    """Run (or continue) the search ``config`` describes, recording into ``store``."""
+    """Run (or continue) the search ``config`` describes, recording into ``store``; the
+    proposer is ``make_proposer``'s unless given."""
     task = registry.load_task(config.task)
-    if proposer is None and not config.proposer.startswith(REPLAY_PREFIX):
+    if proposer is None:
         proposer = make_proposer(config, task)
     with make_pool(config) as pool:
         store.append(pool_record(pool))
-        search = Search(config, task, proposer, pool, store, replayed_answers(config), on_event)
+        search = Search(config, task, proposer, pool, store, on_event)
         return search.run()

@@ -10,19 +10,21 @@ asking the model again or re-evaluating what was finished.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.fingerprint import fingerprint
 from sga_agent.heap import Entry, SolutionHeap
-from sga_agent.parsing import CodeRejected, check_code, parse_response
+from sga_agent.parsing import CodeRejected, check_candidate, parse_response
 from sga_agent.prompting import Shown, build_messages
-from sga_agent.proposers.base import Proposal, Proposer, ProposerError
+from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
 from sga_agent.run_store import RunStore
-from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, Parent, Task
+from sga_agent.task import Evaluation, EvaluationSettings, Parent, Task
 
 SEED = "00-seed"
 
@@ -67,16 +69,13 @@ class Search:
     ----------
     config : SearchConfig
     task : Task
-        The task object (only its kind, seed and prompt parts are used here; evaluation
-        happens in the evaluator's workers).
-    proposer : Proposer or BuiltinProposer, optional
-        Asked for answers not recorded yet: a model (given the prompt) or a task's LLM-free
-        proposer (given the top-K parents); None when every answer must come from
-        ``prerecorded`` (a replayed run).
+        The task object (only its kind, seed, prompt parts and solution checks are used here;
+        evaluation happens in the evaluator's workers).
+    proposer : Proposer
+        Asked for the answers this run has not recorded yet: a model (which reads the prompt),
+        a task's LLM-free proposer (the top-K parents) or a recorded run (the slots' ids).
     evaluator : Evaluator
     store : RunStore
-    prerecorded : dict, optional
-        Model answers by candidate id from another run (replay).
     on_event : callable, optional
         Called with every event (progress display).
     """
@@ -85,10 +84,9 @@ class Search:
         self,
         config: SearchConfig,
         task: Task,
-        proposer: Proposer | BuiltinProposer | None,
+        proposer: Proposer,
         evaluator: Evaluator,
         store: RunStore,
-        prerecorded: dict[str, dict[str, Any]] | None = None,
         on_event: Callable[[dict[str, Any]], None] | None = None,
     ) -> None:
         self.config = config
@@ -98,7 +96,7 @@ class Search:
         self.store = store
         self.on_event = on_event or (lambda event: None)
         recorded = store.recorded()
-        self._answers = {**(prerecorded or {}), **recorded.proposals}
+        self._answers = recorded.proposals
         self._evaluations = recorded.evaluations
         self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self.heap = SolutionHeap()
@@ -121,33 +119,26 @@ class Search:
             The proposer failed in a way that asking again cannot fix (no API key, nothing at
             the address, an unknown model); the run stays resumable, without a summary.
         """
-        self._emit({"type": "search_started", "resumed": bool(self._evaluations)})
+        self._emit(ev.SearchStarted(resumed=bool(self._evaluations)))
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
         for iteration in range(1, self.config.iterations + 1):
             stopped = self._budget_exceeded()
             if stopped:
                 break
-            self._emit({"type": "iteration_started", "iteration": iteration})
-            shown = self.heap.top(self.config.top_k)
-            messages = build_messages(
-                self.task.kind,
-                self.task.prompt_parts(),
-                [Shown(entry.code, entry.feedback, entry.loss) for entry in shown],
-            )
-            parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
-            answers = self._answers_for(iteration, messages, parents)
+            self._emit(ev.IterationStarted(iteration))
+            answers = self._answers_for(iteration, self.heap.top(self.config.top_k))
             stopped = self._evaluate_all(
                 [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
             )
             top = [entry.summary() for entry in self.heap.top(self.config.top_k)]
             self.store.save_heap(iteration, top)
-            self._emit({"type": "iteration_done", "iteration": iteration, "top": top})
+            self._emit(ev.IterationDone(iteration, top))
             if stopped:
                 break
         result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.config.top_k))
         self.store.save_summary(self._summary(result))
-        self._emit({"type": "run_finished", "stopped": stopped})
+        self._emit(ev.RunFinished(stopped))
         return result
 
     # ------------------------------------------------------------------ proposals
@@ -162,27 +153,31 @@ class Search:
             for j in range(cfg.explore)
         ]
 
-    def _answers_for(
-        self, iteration: int, messages, parents: list[Parent]
-    ) -> list[tuple[str, dict[str, Any]]]:
-        """(candidate, proposal dict) of every slot that has an answer, recorded or new."""
+    def _answers_for(self, iteration: int, shown: list[Entry]) -> list[tuple[str, dict[str, Any]]]:
+        """(candidate, proposal dict) of every slot that has an answer, recorded or new.
+
+        The prompt shows ``shown`` (the top-K); it is built only if the proposer reads it.
+        """
         slots = self._slots(iteration)
         missing: dict[float, list[str]] = {}
         for candidate, temperature in slots:
             if candidate not in self._answers:
                 missing.setdefault(temperature, []).append(candidate)
+        prompt = functools.cache(functools.partial(self._messages, shown))
+        parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
         for temperature, candidates in missing.items():
             if self._budget_exceeded():
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
-            new = self._ask(messages, parents, temperature, len(candidates), seed)
+            request = ProposalRequest(candidates, temperature, seed, parents, prompt)
+            new = self._ask(request)
             for candidate, proposal in zip(candidates, new, strict=False):
                 data = proposal.to_dict()
                 self._answers[candidate] = data
-                self.store.save_proposal(candidate, messages, data)
-                self._emit({"type": "proposal", "candidate": candidate, "proposal": data})
+                self.store.save_proposal(candidate, request.built_messages, data)
+                self._emit(ev.ProposalReceived(candidate, data))
             for candidate in candidates[len(new) :]:
-                self._emit({"type": "proposal_missing", "candidate": candidate})
+                self._emit(ev.ProposalMissing(candidate))
         answers = []
         for candidate, _ in slots:
             if candidate in self._answers:
@@ -194,21 +189,17 @@ class Search:
                 answers.append((candidate, data))
         return answers
 
-    def _ask(self, messages, parents, temperature: float, n: int, seed: int) -> list[Proposal]:
-        proposer = self.proposer
-        if proposer is None:
-            self._emit({"type": "proposer_error", "error": "the answer is not in the replayed "
-                        "run and no model is configured"})  # fmt: skip
-            return []
+    def _messages(self, shown: list[Entry]) -> Messages:
+        """The prompt showing ``shown``."""
+        history = [Shown(entry.code, entry.feedback, entry.loss) for entry in shown]
+        return build_messages(self.task.kind, self.task.prompt_parts(), history)
+
+    def _ask(self, request: ProposalRequest) -> list[Proposal]:
+        """The proposer's answers; a transient failure is recorded and gives none."""
         try:
-            if isinstance(proposer, BuiltinProposer):
-                texts = proposer.propose_from(parents, temperature, n, seed)
-                return [Proposal(text, proposer.name, temperature) for text in texts[:n]]
-            return list(proposer.propose(messages, temperature, n))[:n]
+            return list(self.proposer.propose(request))[: request.n]
         except ProposerError as error:
-            self._emit(
-                {"type": "proposer_error", "error": str(error), "transient": error.transient}
-            )
+            self._emit(ev.ProposerFailed(str(error), error.transient))
             if not error.transient:
                 raise
             return []
@@ -220,7 +211,7 @@ class Search:
             reason = "the answer has no ```python code block; put the code in one block"
             return proposal["text"], Evaluation.invalid(reason)
         try:
-            check_code(parsed.code, self.task.kind)
+            check_candidate(parsed.code, self.task)
         except CodeRejected as error:
             return parsed.code, Evaluation.invalid(f"the code was rejected before it ran: {error}")
         return parsed.code, None
@@ -272,7 +263,7 @@ class Search:
         self._evaluations[candidate] = evaluation
         self.store.save_evaluation(candidate, code, evaluation)
         event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
-        self._emit({"type": "evaluation", "candidate": candidate, "evaluation": event})
+        self._emit(ev.CandidateEvaluated(candidate, event))
 
     def _push(self, candidate: str, code: str, key: str, evaluation: Evaluation) -> None:
         """Count the evaluation and push it onto the heap.
@@ -302,9 +293,11 @@ class Search:
             return f"max_evaluations={cfg.max_evaluations} reached"
         return ""
 
-    def _emit(self, event: dict[str, Any]) -> None:
-        self.store.append(event)
-        self.on_event({**event, "totals": self.totals})
+    def _emit(self, event: ev.Event) -> None:
+        """Record ``event``, then show it (as its dict, with the totals) to ``on_event``."""
+        data = event.to_dict()
+        self.store.append(data)
+        self.on_event({**data, "totals": self.totals})
 
     def _summary(self, result: SearchResult) -> dict[str, Any]:
         best = result.best

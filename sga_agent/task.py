@@ -182,6 +182,12 @@ class Task(Protocol):
     ``ValueError`` for a bad value. ``--option KEY=VALUE`` is checked against it before
     anything runs; ``EvaluationSettings.options`` then holds the given options, typed.
 
+    An optional method ``check_solution(code: str) -> None`` checks the shape of a solution's
+    code statically (without running it: a class with the right methods, the right literals)
+    and raises :class:`sga_agent.parsing.CodeRejected`, whose message is feedback for the
+    model. The search and ``sga-agent evaluate`` run it after their generic safety checks
+    (:func:`sga_agent.parsing.check_candidate`), before anything is captured.
+
     Two optional methods warm the helper processes before their first candidate:
     ``warm_up_solutions() -> list[str]`` (captured when a capture server starts; default: the
     seed) and ``warm_up_fit(options: dict)`` (run by a fit worker once it is ready, with the

@@ -25,6 +25,7 @@ from typing import Any
 
 from sga_agent import registry, runner
 from sga_agent.config import ConfigError, SearchConfig
+from sga_agent.events import IterationDone, RunResumed
 from sga_agent.run_store import CONFIG, EVENTS, SUMMARY, RunStore, RunStoreError
 from sga_agent.task import Task
 
@@ -284,7 +285,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         store = RunStore.create(cell.folder, cell.config, meta)
         say(f"{cell.name}: started ({store.path})")
     else:
-        store.append({"type": "resumed"})
+        store.append(RunResumed())
         say(f"{cell.name}: resumed ({store.path})")
     runner.run(cell.config, store, on_event=_progress(cell))
     summary = summary_of(store) or {}
@@ -296,7 +297,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
 
 def _progress(cell: Cell) -> Callable[[dict[str, Any]], None]:
     def report(event: dict[str, Any]) -> None:
-        if event.get("type") == "iteration_done":
+        if event.get("type") == IterationDone.type:
             top = event.get("top") or [{}]
             say(
                 f"{cell.name}: iteration {event['iteration']}/{cell.config.iterations}, "

@@ -18,7 +18,7 @@ from rich.text import Text
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
-from sga_agent.parsing import CodeRejected, check_code
+from sga_agent.parsing import CodeRejected, check_candidate
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox, threads_per_worker
 from sga_agent.task import Evaluation, EvaluationSettings, Task
 
@@ -113,7 +113,7 @@ def evaluate(
     settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=typed)
     solution = extract_solution(text)
     try:
-        check_code(solution, task.kind)
+        check_candidate(solution, task)
     except CodeRejected as error:
         evaluation = Evaluation.invalid(f"the code breaks the rules: {error}")
     else:

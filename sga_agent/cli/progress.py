@@ -13,6 +13,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.syntax import Syntax
 from rich.table import Table
 
+from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.run_store import Recorded, RunStore
 from sga_agent.runner import BUILTIN, REPLAY_PREFIX
@@ -68,20 +69,20 @@ class SearchProgress:
 
     def __call__(self, event: dict[str, Any]) -> None:
         kind = event["type"]
-        if kind == "evaluation":
+        if kind == ev.CandidateEvaluated.type:
             evaluation = event["evaluation"]
             if evaluation["valid"]:
                 self.best = min(self.best, float(evaluation["loss"]))
             else:
                 self.failed += 1
             self.progress.advance(self.bar)
-        elif kind == "proposal_missing":
+        elif kind == ev.ProposalMissing.type:
             self.failed += 1
             self.progress.advance(self.bar)
-        elif kind == "iteration_started":
+        elif kind == ev.IterationStarted.type:
             description = f"iteration {event['iteration']}/{self.config.iterations}"
             self.progress.update(self.bar, description=description)
-        elif kind == "run_finished":
+        elif kind == ev.RunFinished.type:
             self.progress.update(self.bar, description="done")
         self.progress.update(self.bar, status=self._status(event.get("totals")))
 

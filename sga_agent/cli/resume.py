@@ -10,6 +10,7 @@ import click
 from sga_agent.cli import main
 from sga_agent.cli.search import check_executor, execute, make_proposer
 from sga_agent.config import ConfigError
+from sga_agent.events import RunResumed
 from sga_agent.run_store import RunStore, RunStoreError
 
 
@@ -29,16 +30,14 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
         config = store.config()
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
-    resumed: dict[str, str] = {"type": "resumed"}
     if ray_address is not None:
         try:
             config = dataclasses.replace(config, ray_address=ray_address)
         except ConfigError as error:
             raise click.UsageError(str(error)) from error
-        resumed["ray_address"] = ray_address
     check_executor(config)
     proposer = make_proposer(config)
     if store.recorded().finished:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
-    store.append(resumed)
+    store.append(RunResumed(ray_address))
     execute(config, store, as_json, proposer)

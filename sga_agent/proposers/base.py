@@ -1,15 +1,23 @@
 """What the search asks of a proposer, and what it gets back.
 
-A proposer turns chat messages into candidate responses. The search asks it for ``n`` samples
-at one temperature per call (the exploit batch at T_l, the explore batch at T_h) and stores
-every :class:`Proposal` in the run folder, so a proposal must round-trip through JSON.
+Every proposer (a model through litellm, a task's built-in LLM-free proposer, the answers of a
+recorded run) implements :class:`Proposer`: given a :class:`ProposalRequest` (the candidate
+slots to fill, the top-K parents, the temperature, a seed, and the chat messages, built only
+when a proposer reads them) it returns the answers. The search asks once per batch (the
+exploit batch at T_l, the explore batch at T_h) and stores every :class:`Proposal` in the run
+folder, so a proposal must round-trip through JSON.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
+
+from sga_agent.task import Parent
+
+Messages = list[dict[str, str]]
 
 
 @dataclass(frozen=True)
@@ -52,6 +60,48 @@ class Proposal:
         return cls(**data)
 
 
+@dataclass
+class ProposalRequest:
+    """One batch the search asks for.
+
+    Parameters
+    ----------
+    candidates : sequence of str
+        The ids of the slots to fill, in order ("03-exploit-00", ...); ``n`` is their number.
+    temperature : float
+        The batch's temperature: low to exploit the parents, high to explore.
+    seed : int
+        Seed for a proposer's randomness (the same request gives the same answers).
+    parents : sequence of Parent
+        The top-K solutions shown, worst first, best last.
+    prompt : messages, or a callable returning them
+        The chat messages for a model; a callable is called on the first :meth:`messages`
+        only, so proposers that never read the prompt never pay for it.
+    """
+
+    candidates: Sequence[str]
+    temperature: float
+    seed: int = 0
+    parents: Sequence[Parent] = ()
+    prompt: Messages | Callable[[], Messages] = field(default_factory=list)
+    _built: Messages | None = field(default=None, init=False, repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.candidates)
+
+    def messages(self) -> Messages:
+        """The chat messages, built on the first call."""
+        if self._built is None:
+            self._built = self.prompt() if callable(self.prompt) else list(self.prompt)
+        return self._built
+
+    @property
+    def built_messages(self) -> Messages | None:
+        """The messages if a proposer asked for them, else None (nothing to record)."""
+        return self._built
+
+
 class ProposerError(RuntimeError):
     """The model could not be asked (after retries); the message names the cause and the fix.
 
@@ -68,11 +118,12 @@ class ProposerError(RuntimeError):
 
 @runtime_checkable
 class Proposer(Protocol):
-    """Anything that samples responses to chat messages.
+    """Anything that answers a :class:`ProposalRequest`.
 
-    ``propose`` returns up to ``n`` proposals: all of them, or fewer when some requests failed
-    but at least one succeeded (the failures are logged). It raises :class:`ProposerError` only
-    when none succeeded, and returns an empty list for ``n == 0``.
+    ``propose`` returns up to ``request.n`` proposals, for the request's candidates in order:
+    all of them, or fewer (for the first ones) when some failed but at least one succeeded. It
+    raises :class:`ProposerError` only when none succeeded, and returns an empty list for
+    ``n == 0``.
     """
 
     @property
@@ -80,9 +131,7 @@ class Proposer(Protocol):
         """Identifies the proposer in the run config, e.g. "litellm:openai/gpt-4o"."""
         ...
 
-    def propose(
-        self, messages: list[dict[str, str]], temperature: float, n: int
-    ) -> list[Proposal]: ...
+    def propose(self, request: ProposalRequest) -> list[Proposal]: ...
 
 
 def describe_proposer(proposer: Proposer) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 from types import ModuleType
 from typing import Any
 
-from sga_agent.proposers.base import Proposal, ProposerError
+from sga_agent.proposers.base import Proposal, ProposalRequest, ProposerError
 from sga_agent.proposers.redact import RedactingFilter, redact
 
 log = logging.getLogger(__name__)
@@ -152,7 +152,8 @@ class LiteLLMProposer:
 
     Notes
     -----
-    ``propose`` returns the proposals that succeeded: all ``n``, or fewer when some requests
+    ``sample`` (and ``propose``, which asks it with the request's messages) returns the
+    proposals that succeeded: all ``n``, or fewer when some requests
     failed for good (logged as warnings); it raises ``ProposerError`` only when none did. With
     ``n`` in one request, a provider that returns fewer choices is topped up with single
     requests.
@@ -183,7 +184,11 @@ class LiteLLMProposer:
             settings["api_base"] = redact(self.settings.api_base)
         return {"name": self.name, **settings, "use_n": self.use_n}
 
-    def propose(self, messages: list[dict[str, str]], temperature: float, n: int) -> list[Proposal]:
+    def propose(self, request: ProposalRequest) -> list[Proposal]:
+        """Up to ``request.n`` responses to the request's messages at its temperature."""
+        return self.sample(request.messages(), request.temperature, request.n)
+
+    def sample(self, messages: list[dict[str, str]], temperature: float, n: int) -> list[Proposal]:
         """Up to ``n`` sampled responses to ``messages`` at ``temperature``.
 
         Raises

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sga_agent.events import ProposalReceived, SandboxReady
 from sga_agent.run_store import CONFIG, SUMMARY, RunStore
 
 
@@ -116,9 +117,9 @@ def read_run(path: Path) -> Run:
         summary=_read_json(store.path / SUMMARY, None),
     )
     for event in store.events():
-        if event.get("type") == "sandbox":
+        if event.get("type") == SandboxReady.type:
             run.sandbox = event.get("isolation")
-        elif event.get("type") == "proposal":
+        elif event.get("type") == ProposalReceived.type:
             proposal = event.get("proposal", {})
             run.tokens += proposal.get("prompt_tokens", 0) + proposal.get("completion_tokens", 0)
             run.cost_usd += proposal.get("cost_usd", 0.0)

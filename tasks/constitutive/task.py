@@ -11,6 +11,7 @@ from typing import Any
 
 from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
 from tasks.constitutive import prompt_text
+from tasks.constitutive.law_shape import check_law
 from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import SPECS, ConstitutiveSpec
 
@@ -58,6 +59,10 @@ class ConstitutiveTask:
         from tasks.constitutive.evaluation import warm_up
 
         warm_up(self.spec, ConstitutiveOptions(**options))
+
+    def check_solution(self, code: str) -> None:
+        """One class Physics(nn.Module), defaulted __init__, forward(self, F) (nothing is run)."""
+        check_law(code)
 
     def capture(self, solution: str) -> dict[str, Any]:
         """The law's graph (runs its code: capture process only)."""

@@ -15,6 +15,7 @@ from tasks.molecules import prompt_text
 from tasks.molecules.calibration import PROPERTY_LABELS
 from tasks.molecules.constants import DEFAULT_STEPS, DEFAULT_STRAIN_WEIGHT
 from tasks.molecules.options import MoleculeOptions
+from tasks.molecules.solution import check_solution
 
 SEED_SOLUTION = """\
 # Paracetamol (N-(4-hydroxyphenyl)acetamide): an amide-substituted phenol.
@@ -77,6 +78,10 @@ class MoleculeTask:
             template=prompt_text.TEMPLATE,
             requirements=prompt_text.REQUIREMENTS,
         )
+
+    def check_solution(self, code: str) -> None:
+        """Only literal assignments, among them SMILES and coordinates (nothing is run)."""
+        check_solution(code)
 
     def capture(self, solution: str) -> dict[str, Any]:
         """The solution's text: it is data already (read with ``ast``, never executed)."""

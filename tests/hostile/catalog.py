@@ -15,7 +15,7 @@ with header lines::
 ``refused``: the candidate must come back not ok (invalid, error, crashed, timeout,
 out_of_memory or unstable). ``honest``: it may come back ok, but then its reported loss must
 equal an honest re-evaluation of its captured graph. ``static`` records whether
-:func:`sga_agent.parsing.check_code` accepts the code; either way, ``expected`` holds for the
+:func:`sga_agent.parsing.check_candidate` accepts the code; either way, ``expected`` holds for the
 sandbox alone (static checks bypassed) as much as for the whole path.
 
 The files are data. Loading the catalog parses them (``ast``) and runs nothing; never import or

@@ -10,7 +10,8 @@ from collections import Counter
 
 import pytest
 
-from sga_agent.parsing import CodeRejected, check_code
+from sga_agent.parsing import CodeRejected, check_candidate
+from sga_agent.registry import load_task
 from tests.hostile.catalog import (
     CANDIDATES,
     CATEGORIES,
@@ -62,7 +63,7 @@ def test_candidate_headers_parse(candidate):
 def test_static_header_matches_the_static_check(candidate):
     """``static: passes`` candidates reach the sandbox even through the static check."""
     try:
-        check_code(candidate.code, "equation")
+        check_candidate(candidate.code, load_task(candidate.task))
         verdict = "passes"
     except CodeRejected:
         verdict = "rejected"

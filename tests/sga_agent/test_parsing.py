@@ -1,14 +1,12 @@
 """Response parsing and the static checks of solution code."""
 
 import textwrap
-from pathlib import Path
 
 import pytest
 
-from sga_agent.parsing import CodeRejected, check_code, parse_response
+from sga_agent.parsing import CodeRejected, check_candidate, check_code, parse_response
 from sga_agent.registry import load_task, task_names
-
-LAWS = sorted((Path(__file__).resolve().parents[2] / "examples" / "laws").glob("*.py"))
+from sga_agent.task import PromptParts
 
 RESPONSE = """\
 Here is my answer.
@@ -60,9 +58,32 @@ def law(forward_body: str = "return F", head: str = "", init: str = "") -> str:
 
 
 def rejection(code: str, kind: str = "equation") -> str:
+    """The message of the generic checks' rejection of ``code``."""
     with pytest.raises(CodeRejected) as caught:
         check_code(code, kind)
     return str(caught.value)
+
+
+class ListTask:
+    """A task whose solutions are a list literal of numbers; it checks that shape itself."""
+
+    name = "numbers"
+    description = "a list of numbers"
+    kind = "entity"
+
+    def __init__(self) -> None:
+        self.checked: list[str] = []
+
+    def seed_solution(self) -> str:
+        return "values = [1.0, 2.0]\n"
+
+    def prompt_parts(self) -> PromptParts:
+        return PromptParts("a tester", "numbers", "values = [...]", "a list")
+
+    def check_solution(self, code: str) -> None:
+        self.checked.append(code)
+        if not code.startswith("values = ["):
+            raise CodeRejected("the code must start with values = [")
 
 
 # --- parse_response -------------------------------------------------------------------------
@@ -109,45 +130,7 @@ def test_truncated_code_block_runs_to_the_end():
 @pytest.mark.parametrize("name", task_names())
 def test_seed_solutions_of_the_registered_tasks_pass(name):
     task = load_task(name)
-    check_code(task.seed_solution(), task.kind)
-
-
-@pytest.mark.parametrize("path", LAWS, ids=lambda path: path.stem)
-def test_example_laws_pass(path):
-    check_code(path.read_text(encoding="utf-8"), "equation")
-
-
-def test_example_laws_are_found():
-    assert len(LAWS) >= 5
-
-
-@pytest.mark.parametrize(
-    "code",
-    [
-        law("return F", head="import math\nimport numpy as np\n"),
-        law("return torch.nn.functional.relu(F)"),
-        law("return F", init=", *, beta: float = 2.0"),
-        law("return getattr(self, 'alpha') * F"),
-        law("return F")
-        .replace("forward(self, F: torch.Tensor)", "forward(self, input)")
-        .replace("return F", "return input"),
-        law("return F")
-        .replace("(nn.Module)", "(Base)")
-        .replace("class Physics", "class Base(torch.nn.Module):\n    pass\n\n\nclass Physics"),
-        law() + "\n\nif __name__ == '__main__':\n    print(Physics()(torch.eye(3)))\n",
-    ],
-    ids=[
-        "math-numpy",
-        "functional",
-        "kw-only-default",
-        "literal-getattr",
-        "input-argument",
-        "local-base",
-        "main-guard",
-    ],
-)
-def test_ordinary_laws_pass(code):
-    check_code(code, "equation")
+    check_candidate(task.seed_solution(), task)
 
 
 def test_allowed_imports_can_be_widened_but_not_to_forbidden_modules():
@@ -155,10 +138,6 @@ def test_allowed_imports_can_be_widened_but_not_to_forbidden_modules():
     check_code(code, "equation", allowed_imports=["torch", "scipy"])
     with pytest.raises(CodeRejected, match="importing 'os' is not allowed"):
         check_code(law("return F", head="import os\n"), "equation", ["torch", "os"])
-
-
-def test_molecule_with_backslash_smiles_passes():
-    check_code('SMILES = "C/C=C\\N"\ncoordinates = [[0, 0, 0], [1.2, -0.5, 1e-3]]\n', "entity")
 
 
 # --- check_code: what is rejected, and how it is said ---------------------------------------
@@ -226,47 +205,6 @@ def test_forbidden_constructs_are_rejected_with_their_line(body, head, expected)
     assert message.startswith(f"line {line}: ")
 
 
-@pytest.mark.parametrize(
-    ("code", "expected"),
-    [
-        ("import torch\n", "defines no top-level class 'Physics'"),
-        (
-            "class Physics:\n    def forward(self, F):\n        return F\n",
-            "must derive from nn.Module (torch.nn.Module); it derives from nothing",
-        ),
-        (law().replace("(nn.Module)", "(object)"), "it derives from object"),
-        (
-            law().replace("self, alpha", "self, beta, alpha"),
-            "needs a default value (the starting value of the fit); missing for: beta",
-        ),
-        (law(init=", *, beta"), "missing for: beta"),
-        (
-            law().replace("forward(self, F: torch.Tensor)", "forward(self, F, G)"),
-            "exactly one required argument besides self, the input F; it requires F, G",
-        ),
-        (
-            law().replace("forward(self, F: torch.Tensor)", "forward(self)"),
-            "it requires no argument",
-        ),
-        (law().replace("def forward", "def backward"), "defines no forward method"),
-        (law() + "\n\nclass Physics(nn.Module):\n    pass\n", "is defined twice"),
-    ],
-    ids=[
-        "no-class",
-        "no-base",
-        "wrong-base",
-        "no-default",
-        "kw-only",
-        "two-inputs",
-        "no-input",
-        "no-forward",
-        "twice",
-    ],
-)
-def test_law_shape_is_checked(code, expected):
-    assert expected in rejection(code)
-
-
 def test_syntax_errors_name_the_line():
     message = rejection("import torch\n\nclass Physics(nn.Module:\n    pass\n")
     assert message.startswith("line 3: the code is not valid Python (")
@@ -274,62 +212,43 @@ def test_syntax_errors_name_the_line():
 
 def test_problems_are_listed_by_line_and_capped():
     code = "\n".join(f"x{i} = eval('{i}')" for i in range(8))
-    lines = rejection(code).splitlines()
+    with pytest.raises(CodeRejected) as caught:
+        check_candidate(code, load_task("elastic"))
+    lines = str(caught.value).splitlines()
     assert [line.split(":")[0] for line in lines[:5]] == [f"line {i}" for i in range(1, 6)]
     assert lines[5] == "(and 4 more problems)"  # three evals and the missing class
-
-
-@pytest.mark.parametrize(
-    ("code", "expected"),
-    [
-        (
-            'import os\nSMILES = "CCO"\ncoordinates = [[0, 0, 0]]',
-            "line 1: importing 'os' is not allowed: solutions may not reach files, processes or "
-            "the network; this task's code may not import anything",
-        ),
-        (
-            'SMILES = "CCO"\ncoordinates = [[0, 0, 0]]\nprint(SMILES)',
-            "line 3: only assignments of literal values",
-        ),
-        (
-            'SMILES = "CC" + "O"\ncoordinates = [[0, 0, 0]]',
-            "line 1: the value of 'SMILES' must be a literal",
-        ),
-        (
-            'SMILES = "CCO"\ncoordinates = [[0.0, 0.0, 0.0] for _ in range(3)]',
-            "line 2: the value of 'coordinates' must be a literal",
-        ),
-        ('SMILES = "CCO"', "the code must assign coordinates"),
-        ("SMILES = 3\ncoordinates = [[0, 0, 0]]", "line 1: SMILES must be a string literal"),
-        (
-            'SMILES = "CCO"\ncoordinates = [[0, True, "a"]]',
-            "line 2: coordinates must be a non-empty list of rows of numbers",
-        ),
-        (
-            'SMILES: __import__("os") = "CCO"\ncoordinates = [[0, 0, 0]]',
-            "'__import__' is not allowed",
-        ),
-        (
-            'def f():\n    pass\nSMILES = "C"\ncoordinates = [[0, 0, 0]]',
-            "line 1: only assignments of literal values",
-        ),
-    ],
-    ids=[
-        "import",
-        "call",
-        "arithmetic",
-        "comprehension",
-        "missing",
-        "smiles-type",
-        "coordinate-type",
-        "annotation",
-        "function",
-    ],
-)
-def test_entity_code_is_literal_data_only(code, expected):
-    assert expected in rejection(code, kind="entity")
 
 
 def test_unknown_kind_is_a_programming_error():
     with pytest.raises(ValueError, match="kind must be one of"):
         check_code("x = 1", "formula")
+
+
+# --- check_candidate: the generic rules, then the task's own check ----------------------------
+
+
+def test_a_task_check_runs_after_the_generic_rules_and_both_are_reported():
+    task = ListTask()
+    check_candidate("values = [3.0]\n", task)
+    with pytest.raises(CodeRejected) as caught:
+        check_candidate("import os\nx = 1\n", task)
+    assert caught.value.problems == [
+        (1, "importing 'os' is not allowed: solutions may not reach files, processes or the "
+            "network; this task's code may not import anything"),
+        (0, "the code must start with values = ["),
+    ]  # fmt: skip
+    assert str(caught.value).splitlines()[1] == "the code must start with values = ["
+
+
+def test_code_that_does_not_parse_is_not_shown_to_the_task():
+    task = ListTask()
+    with pytest.raises(CodeRejected, match="line 1: the code is not valid Python"):
+        check_candidate("values = [\n", task)
+    assert task.checked == []
+
+
+def test_a_task_without_a_check_gets_the_generic_rules_only():
+    plain = type("Plain", (), {"kind": "entity"})()
+    check_candidate("anything = 1\n", plain)
+    with pytest.raises(CodeRejected, match="'eval' is not allowed"):
+        check_candidate("x = eval('1')\n", plain)

@@ -15,13 +15,17 @@ from typing import Any
 
 import pytest
 
+from sga_agent.config import SearchConfig
 from sga_agent.proposers import (
     BackboneSettings,
     BackboneSettingsError,
+    BuiltinAdapter,
     LiteLLMProposer,
     Proposal,
+    ProposalRequest,
     Proposer,
     ProposerError,
+    ReplayProposer,
     describe_proposer,
 )
 from sga_agent.proposers.litellm_backbone import (
@@ -31,6 +35,9 @@ from sga_agent.proposers.litellm_backbone import (
     import_litellm,
 )
 from sga_agent.proposers.redact import RedactingFilter, redact
+from sga_agent.registry import load_task
+from sga_agent.run_store import RunStore, RunStoreError
+from sga_agent.runner import make_proposer
 from tests.sga_agent.openai_server import Reply, ScriptedOpenAIServer
 
 KEY = "sk-test-not-a-real-key"
@@ -95,7 +102,7 @@ def assert_no_key(text: str) -> None:
 
 def test_n_choices_share_the_tokens_and_price_of_their_request(litellm: Any) -> None:
     mocked = Mocked(litellm, "### Code\nclass Physics: ...")
-    proposals = proposer(completion=mocked, use_n=True).propose(MESSAGES, 0.5, 3)
+    proposals = proposer(completion=mocked, use_n=True).sample(MESSAGES, 0.5, 3)
     assert [p.text for p in proposals] == ["### Code\nclass Physics: ..."] * 3
     assert mocked.calls[0]["n"] == 3 and mocked.calls[0]["temperature"] == 0.5
     response = litellm.completion(model="openai/gpt-4o", messages=MESSAGES, mock_response="x", n=3)
@@ -111,7 +118,7 @@ def test_n_choices_share_the_tokens_and_price_of_their_request(litellm: Any) -> 
 
 def test_a_model_without_a_price_costs_zero_with_a_note(litellm: Any) -> None:
     mocked = Mocked(litellm, "hello")
-    (proposal,) = proposer("openai/no-such-model-xyz", completion=mocked).propose(MESSAGES, 1.0, 1)
+    (proposal,) = proposer("openai/no-such-model-xyz", completion=mocked).sample(MESSAGES, 1.0, 1)
     assert proposal.cost_usd == 0.0
     assert proposal.cost_note == NO_PRICE_NOTE
     assert proposal.prompt_tokens > 0 and proposal.completion_tokens > 0
@@ -133,9 +140,7 @@ def test_proposals_round_trip_through_a_dict() -> None:
 def test_transient_errors_are_retried_with_growing_waits(litellm: Any, failure: str) -> None:
     mocked = Mocked(litellm, failure, failure, failure, "finally")
     sleeps: list[float] = []
-    (proposal,) = proposer(completion=mocked, sleeps=sleeps, backoff_s=2.0).propose(
-        MESSAGES, 1.0, 1
-    )
+    (proposal,) = proposer(completion=mocked, sleeps=sleeps, backoff_s=2.0).sample(MESSAGES, 1.0, 1)
     assert proposal.text == "finally"
     assert len(mocked.calls) == 4
     assert [1 <= sleeps[0] <= 2, 2 <= sleeps[1] <= 4, 4 <= sleeps[2] <= 8] == [True] * 3
@@ -146,7 +151,7 @@ def test_other_5xx_statuses_are_retried(litellm: Any) -> None:
     unavailable.status_code = 503  # litellm's mock turns it into an error with this status
     mocked = Mocked(litellm, unavailable, "ok")
     sleeps: list[float] = []
-    assert proposer(completion=mocked, sleeps=sleeps).propose(MESSAGES, 1.0, 1)[0].text == "ok"
+    assert proposer(completion=mocked, sleeps=sleeps).sample(MESSAGES, 1.0, 1)[0].text == "ok"
     assert len(sleeps) == 1
 
 
@@ -154,18 +159,18 @@ def test_retries_give_up_with_the_count_and_cause(litellm: Any) -> None:
     mocked = Mocked(litellm, *["litellm.RateLimitError"] * 3)
     sleeps: list[float] = []
     with pytest.raises(ProposerError, match="after 3 attempts.*RateLimitError"):
-        proposer(completion=mocked, sleeps=sleeps, max_retries=2).propose(MESSAGES, 1.0, 1)
+        proposer(completion=mocked, sleeps=sleeps, max_retries=2).sample(MESSAGES, 1.0, 1)
     assert len(sleeps) == 2
 
 
 def test_giving_up_after_retries_is_transient_and_a_request_error_is_not(litellm: Any) -> None:
     mocked = Mocked(litellm, "litellm.RateLimitError")
     with pytest.raises(ProposerError) as raised:
-        proposer(completion=mocked, max_retries=0).propose(MESSAGES, 1.0, 1)
+        proposer(completion=mocked, max_retries=0).sample(MESSAGES, 1.0, 1)
     assert raised.value.transient
     bad = litellm.BadRequestError(message="no", llm_provider="openai", model="gpt-4o")
     with pytest.raises(ProposerError) as raised:
-        proposer(completion=Mocked(litellm, bad)).propose(MESSAGES, 1.0, 1)
+        proposer(completion=Mocked(litellm, bad)).sample(MESSAGES, 1.0, 1)
     assert not raised.value.transient
 
 
@@ -173,7 +178,7 @@ def test_nothing_listening_fails_at_once_naming_the_fix(litellm: Any) -> None:
     """A closed port is not retried (no wait) and is no transient failure."""
     backbone = proposer("hosted_vllm/some-model", api_base=closed_port_url())
     with pytest.raises(ProposerError) as raised:
-        backbone.propose(MESSAGES, 1.0, 2)
+        backbone.sample(MESSAGES, 1.0, 2)
     assert not raised.value.transient
     assert "connection refused" in str(raised.value)
     assert "start the server or correct --api-base" in str(raised.value)
@@ -199,7 +204,7 @@ def test_a_timeout_is_retried_then_reported_with_the_fix(litellm: Any) -> None:
     sleeps: list[float] = []
     slow = proposer(completion=mocked, sleeps=sleeps, timeout_s=0.01, max_retries=1)
     with pytest.raises(ProposerError, match="did not answer within timeout_s=0.01 s.*raise"):
-        slow.propose(MESSAGES, 1.0, 1)
+        slow.sample(MESSAGES, 1.0, 1)
     assert len(mocked.calls) == 2 and len(sleeps) == 1
     assert mocked.calls[0]["timeout"] == 0.01
 
@@ -212,7 +217,7 @@ def test_a_rejected_key_fails_at_once_without_showing_it(
     )
     mocked = Mocked(litellm, rejected)
     with caplog.at_level(logging.DEBUG), pytest.raises(ProposerError) as raised:
-        proposer(completion=mocked).propose(MESSAGES, 1.0, 1)
+        proposer(completion=mocked).sample(MESSAGES, 1.0, 1)
     assert "authentication failed for openai/gpt-4o" in str(raised.value)
     assert raised.value.__cause__ is None and raised.value.__suppress_context__
     assert len(mocked.calls) == 1
@@ -226,7 +231,7 @@ def test_a_missing_key_names_the_variable_to_set(
     monkeypatch.delenv("OPENAI_API_KEY")
     mocked = Mocked(litellm, "litellm.InternalServerError")
     with pytest.raises(ProposerError, match="no API key for openai/gpt-4o: set OPENAI_API_KEY"):
-        proposer(completion=mocked).propose(MESSAGES, 1.0, 1)
+        proposer(completion=mocked).sample(MESSAGES, 1.0, 1)
     assert len(mocked.calls) == 1
 
 
@@ -241,7 +246,7 @@ def test_request_errors_are_not_retried(litellm: Any, error: str, message: str) 
     exception = getattr(litellm, error)(message="no", llm_provider="openai", model="gpt-4o")
     mocked = Mocked(litellm, exception)
     with pytest.raises(ProposerError, match=message):
-        proposer(completion=mocked).propose(MESSAGES, 1.0, 1)
+        proposer(completion=mocked).sample(MESSAGES, 1.0, 1)
     assert len(mocked.calls) == 1
 
 
@@ -251,11 +256,11 @@ def test_request_errors_are_not_retried(litellm: Any, error: str, message: str) 
 def test_some_failures_return_the_rest_and_all_failures_raise(litellm: Any) -> None:
     bad = litellm.BadRequestError(message="no", llm_provider="openai", model="gpt-4o")
     mocked = Mocked(litellm, "a", bad, "b")
-    some = proposer(completion=mocked, use_n=False, concurrency=1).propose(MESSAGES, 1.0, 3)
+    some = proposer(completion=mocked, use_n=False, concurrency=1).sample(MESSAGES, 1.0, 3)
     assert sorted(p.text for p in some) == ["a", "b"]
     mocked = Mocked(litellm, bad, bad)
     with pytest.raises(ProposerError, match="all 2 requests failed"):
-        proposer(completion=mocked, use_n=False).propose(MESSAGES, 1.0, 2)
+        proposer(completion=mocked, use_n=False).sample(MESSAGES, 1.0, 2)
 
 
 def test_choices_missing_from_an_n_request_are_topped_up(litellm: Any) -> None:
@@ -265,7 +270,7 @@ def test_choices_missing_from_an_n_request_are_topped_up(litellm: Any) -> None:
         return litellm.completion(**kwargs, mock_response=f"answer {len(calls)}")
 
     calls: list[dict[str, Any]] = []
-    proposals = proposer(completion=ignores_n, use_n=True).propose(MESSAGES, 0.5, 3)
+    proposals = proposer(completion=ignores_n, use_n=True).sample(MESSAGES, 0.5, 3)
     assert len(proposals) == 3 and len(calls) == 3
 
 
@@ -274,7 +279,7 @@ def test_n_is_used_for_providers_that_support_it(litellm: Any) -> None:
     assert proposer("hosted_vllm/qwen", api_base="http://127.0.0.1:8000/v1").use_n
     assert not proposer("anthropic/claude-3-5-sonnet-20240620").use_n
     assert not proposer("mistral/mistral-large-latest").use_n
-    assert proposer("openai/gpt-4o").propose(MESSAGES, 1.0, 0) == []
+    assert proposer("openai/gpt-4o").sample(MESSAGES, 1.0, 0) == []
 
 
 # --- settings and description ------------------------------------------------------------------
@@ -341,7 +346,7 @@ def test_a_server_that_supports_n_gets_one_request(
     litellm: Any, numbered: ScriptedOpenAIServer
 ) -> None:
     backbone = proposer("openai/test-model", api_base=numbered.url)
-    proposals = backbone.propose(MESSAGES, 0.5, 4)
+    proposals = backbone.sample(MESSAGES, 0.5, 4)
     assert sorted(p.text for p in proposals) == [f"answer {i}" for i in range(4)]
     (request,) = numbered.requests
     assert (request["n"], request["temperature"], request["messages"]) == (4, 0.5, MESSAGES)
@@ -355,7 +360,7 @@ def test_without_n_each_sample_is_its_own_request(
     litellm: Any, numbered: ScriptedOpenAIServer
 ) -> None:
     backbone = proposer("openai/test-model", api_base=numbered.url, use_n=False, concurrency=3)
-    proposals = backbone.propose(MESSAGES, 1.0, 5)
+    proposals = backbone.sample(MESSAGES, 1.0, 5)
     assert sorted(p.text for p in proposals) == [f"answer {i}" for i in range(5)]
     assert len(numbered.requests) == 5
     assert all(r.get("n", 1) == 1 and r["temperature"] == 1.0 for r in numbered.requests)
@@ -365,7 +370,7 @@ def test_a_429_from_the_server_is_retried(litellm: Any) -> None:
     sleeps: list[float] = []
     with ScriptedOpenAIServer([Reply.error(429), Reply.error(500), ["ok", "fine"]]) as server:
         backbone = proposer("openai/test-model", api_base=server.url, sleeps=sleeps)
-        proposals = backbone.propose(MESSAGES, 0.5, 2)
+        proposals = backbone.sample(MESSAGES, 0.5, 2)
     assert [p.text for p in proposals] == ["ok", "fine"]
     assert len(server.requests) == 3 and len(sleeps) == 2
 
@@ -375,7 +380,7 @@ def test_a_slow_server_times_out(litellm: Any) -> None:
         backbone = proposer("openai/test-model", api_base=server.url, timeout_s=0.2, max_retries=0)
         start = time.monotonic()
         with pytest.raises(ProposerError, match="did not answer within timeout_s=0.2 s"):
-            backbone.propose(MESSAGES, 1.0, 1)
+            backbone.sample(MESSAGES, 1.0, 1)
         assert time.monotonic() - start < 2.0
 
 
@@ -386,7 +391,7 @@ def test_a_key_echoed_by_the_server_is_hidden(
     with ScriptedOpenAIServer([echo]) as server, caplog.at_level(logging.DEBUG):
         backbone = proposer("openai/test-model", api_base=server.url)
         with pytest.raises(ProposerError, match="authentication failed") as raised:
-            backbone.propose(MESSAGES, 1.0, 1)
+            backbone.sample(MESSAGES, 1.0, 1)
     assert "Incorrect API key provided: ***" in str(raised.value)
     assert_no_key(str(raised.value))
     assert_no_key(caplog.text)
@@ -399,5 +404,70 @@ def test_no_key_for_a_local_server_says_any_value_will_do(
     with ScriptedOpenAIServer(["unused"]) as server:
         backbone = proposer("openai/test-model", api_base=server.url)
         with pytest.raises(ProposerError, match="set OPENAI_API_KEY .any value does"):
-            backbone.propose(MESSAGES, 1.0, 1)
+            backbone.sample(MESSAGES, 1.0, 1)
     assert server.requests == []
+
+
+# --- one protocol: a request in, proposals out -------------------------------------------------
+
+
+def test_a_request_builds_its_messages_once_and_only_when_read() -> None:
+    built: list[int] = []
+
+    def prompt() -> list[dict[str, str]]:
+        built.append(1)
+        return MESSAGES
+
+    request = ProposalRequest(["01-exploit-00", "01-exploit-01"], 0.5, prompt=prompt)
+    assert request.n == 2 and request.built_messages is None and not built
+    assert request.messages() is request.messages() and built == [1]
+    assert request.built_messages == MESSAGES
+    assert ProposalRequest(["a"], 1.0, prompt=MESSAGES).messages() == MESSAGES
+
+
+def test_the_litellm_proposer_answers_a_request_with_its_messages(litellm: Any) -> None:
+    mocked = Mocked(litellm, "### Code\nclass Physics: ...")
+    backbone = proposer(completion=mocked)
+    (proposal,) = backbone.propose(ProposalRequest(["01-explore-00"], 0.9, prompt=lambda: MESSAGES))
+    assert proposal.text == "### Code\nclass Physics: ..." and proposal.temperature == 0.9
+    assert mocked.calls[0]["messages"] == MESSAGES and mocked.calls[0]["temperature"] == 0.9
+
+
+def recorded_run(tmp_path: Any) -> RunStore:
+    store = RunStore.create(tmp_path, SearchConfig(task="elastic", proposer="x/y"), {})
+    for candidate, text in (("01-exploit-00", "a"), ("01-explore-00", "b")):
+        store.append(
+            {"type": "proposal", "candidate": candidate,
+             "proposal": Proposal(text, "openai/gpt-4o", 0.5, 10, 5, 0.01).to_dict()}
+        )  # fmt: skip
+    return store
+
+
+def test_the_replay_proposer_answers_from_the_recorded_run(tmp_path: Any) -> None:
+    replay = ReplayProposer(recorded_run(tmp_path).path)
+    request = ProposalRequest(["01-exploit-00"], 0.5, prompt=lambda: pytest.fail("read"))
+    (proposal,) = replay.propose(request)
+    assert proposal == Proposal("a", "openai/gpt-4o", 0.5, 10, 5, 0.01)
+    gap = ProposalRequest(["01-explore-00", "01-explore-01", "01-explore-02"], 1.0)
+    assert [p.text for p in replay.propose(gap)] == ["b"]  # the slots after a gap get none
+    with pytest.raises(ProposerError, match="has no answer for 02-exploit-00") as error:
+        replay.propose(ProposalRequest(["02-exploit-00"], 0.5))
+    assert error.value.transient
+    with pytest.raises(RunStoreError, match="is not a run folder"):
+        ReplayProposer(tmp_path / "nothing")
+
+
+def test_the_runner_makes_every_kind_of_proposer(tmp_path: Any, litellm: Any) -> None:
+    task = load_task("elastic")
+    run = recorded_run(tmp_path)
+
+    def made(name: str) -> Proposer:
+        return make_proposer(SearchConfig(task="elastic", proposer=name), task)
+
+    builtin, replay, model = made("builtin"), made(f"replay:{run.path}"), made("openai/gpt-4o")
+    assert isinstance(builtin, BuiltinAdapter) and builtin.name == "builtin:gp"
+    assert builtin.task_options == {"optimizer": "lbfgs"}
+    assert isinstance(replay, ReplayProposer) and isinstance(model, LiteLLMProposer)
+    assert all(isinstance(p, Proposer) for p in (builtin, replay, model))
+    texts = builtin.propose(ProposalRequest(["01-exploit-00"], 0.5, seed=3))
+    assert len(texts) == 1 and "class Physics" in texts[0].text

@@ -95,9 +95,9 @@ class Scripted:
     def __init__(self, answers: list[str]) -> None:
         self.answers = list(answers)
 
-    def propose(self, messages, temperature, n):
-        taken, self.answers = self.answers[:n], self.answers[n:]
-        return [Proposal(text, "scripted", temperature, 10, 5, 0.001) for text in taken]
+    def propose(self, request):
+        taken, self.answers = self.answers[: request.n], self.answers[request.n :]
+        return [Proposal(text, "scripted", request.temperature, 10, 5, 0.001) for text in taken]
 
 
 def config(**overrides) -> SearchConfig:

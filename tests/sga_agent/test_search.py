@@ -15,10 +15,12 @@ from concurrent.futures import Future
 import pytest
 
 from sga_agent.config import SearchConfig
-from sga_agent.proposers.base import Proposal, ProposerError
+from sga_agent.proposers.base import Proposal, ProposalRequest, ProposerError
+from sga_agent.proposers.builtin import BuiltinAdapter
+from sga_agent.proposers.replay import ReplayProposer
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
-from sga_agent.task import Evaluation, PromptParts
+from sga_agent.task import Evaluation, Parent, PromptParts
 
 LAW = """```python
 import torch
@@ -62,7 +64,8 @@ class LossInCode:
 
 
 class Scripted:
-    """Proposer double: answers from a list, in order; records temperatures."""
+    """Proposer double: answers from a list, in order, having read the prompt as a model
+    would; records temperatures."""
 
     name = "scripted"
 
@@ -70,7 +73,9 @@ class Scripted:
         self.answers = list(answers)
         self.temperatures: list[float] = []
 
-    def propose(self, messages, temperature, n):
+    def propose(self, request: ProposalRequest) -> list[Proposal]:
+        assert request.messages()[-1]["role"] == "user"
+        n, temperature = request.n, request.temperature
         self.temperatures += [temperature] * n
         if not self.answers:
             raise ProposerError("no more scripted answers")
@@ -212,11 +217,83 @@ def test_replay_needs_no_model(tmp_path):
     full, full_store, *_ = run(tmp_path / "full", answers)
     cfg = config(proposer=f"replay:{full_store.path}")
     store = RunStore.create(tmp_path / "replay", cfg, {})
-    recorded = full_store.recorded().proposals
-    replay = Search(cfg, FakeTask(), None, LossInCode(), store, prerecorded=recorded).run()
+    replay = Search(cfg, FakeTask(), ReplayProposer(full_store.path), LossInCode(), store).run()
     assert [(e.candidate, e.loss) for e in replay.heap.top(10)] == [
         (e.candidate, e.loss) for e in full.heap.top(10)
     ]
+    assert replay.totals.tokens == full.totals.tokens and store.recorded().finished
+    # the replayed answers are this run's own now: it resumes without the recorded run
+    assert store.recorded().proposals == full_store.recorded().proposals
+    assert not (store.path / "candidates/01-exploit-00/messages.json").exists()
+
+
+def test_a_replay_recorded_before_replayed_answers_were_stored_resumes(tmp_path):
+    """An older replayed run logged evaluations but no proposals: its resume asks the replayed
+    run again and evaluates only what was not finished."""
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    full, full_store, *_ = run(tmp_path / "full", answers)
+    cfg = config(proposer=f"replay:{full_store.path}")
+    store = RunStore.create(tmp_path / "replay", cfg, {})
+    for event in full_store.events():
+        if event["type"] == "evaluation" and event["candidate"] < "02":
+            store.append({k: v for k, v in event.items() if k != "time"})
+    evaluator = LossInCode()
+    resumed = Search(cfg, FakeTask(), ReplayProposer(full_store.path), evaluator, store).run()
+    assert len(evaluator.calls) == 3  # iteration 2's three answers
+    assert [(e.candidate, e.loss) for e in resumed.heap.top(10)] == [
+        (e.candidate, e.loss) for e in full.heap.top(10)
+    ]
+
+
+def test_a_replay_without_an_answer_records_a_transient_error_and_goes_on(tmp_path):
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0)]
+    short, short_store, *_ = run(tmp_path / "short", answers, iterations=1)
+    cfg = config(proposer=f"replay:{short_store.path}")  # two iterations
+    store = RunStore.create(tmp_path / "replay", cfg, {})
+    replay = Search(cfg, FakeTask(), ReplayProposer(short_store.path), LossInCode(), store).run()
+    assert replay.best.loss == 3.0
+    errors = [e for e in store.events() if e["type"] == "proposer_error"]
+    assert [e["transient"] for e in errors] == [True, True]  # iteration 2's two batches
+    assert "has no answer for 02-exploit-00" in errors[0]["error"]
+    missing = [e["candidate"] for e in store.events() if e["type"] == "proposal_missing"]
+    assert missing == ["02-exploit-00", "02-explore-00", "02-explore-01"]
+
+
+class Halving:
+    """A task's built-in proposer double: halves the best parent's number; never reads a prompt."""
+
+    name = "builtin:halving"
+    task_options = {"steps": 3}
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[list[Parent], float, int, int]] = []
+
+    def propose_from(self, parents, temperature, n, seed):
+        self.calls.append((list(parents), temperature, n, seed))
+        best = float(re.search(r"loss ([-\d.e+]+)", parents[-1].code).group(1))
+        return [LAW.format(value=best / (2 + i)) for i in range(n + 1)]  # one too many
+
+
+def test_a_builtin_proposer_gets_the_parents_and_no_prompt_is_built(tmp_path, monkeypatch):
+    import sga_agent.search
+
+    def no_prompt(*args):
+        raise AssertionError("a prompt was built for a proposer that does not read it")
+
+    monkeypatch.setattr(sga_agent.search, "build_messages", no_prompt)
+    cfg = config(iterations=1)
+    store = RunStore.create(tmp_path, cfg, {})
+    builtin = Halving()
+    adapter = BuiltinAdapter(builtin)
+    assert adapter.name == "builtin:halving" and adapter.task_options == {"steps": 3}
+    result = Search(cfg, FakeTask(), adapter, LossInCode(), store).run()
+    assert [call[1:3] for call in builtin.calls] == [(0.5, 1), (1.0, 2)]
+    assert builtin.calls[0][0][-1].loss == 100.0  # the seed, the only parent
+    assert len({call[3] for call in builtin.calls}) == 2  # a seed per batch
+    assert result.best.loss == 100.0 / 3
+    assert not list(store.path.glob("candidates/*/messages.json"))
+    proposal = json.loads((store.path / "candidates/01-exploit-00/proposal.json").read_text())
+    assert proposal["model"] == "builtin:halving" and proposal["temperature"] == 0.5
 
 
 class Failing(Scripted):
@@ -226,11 +303,11 @@ class Failing(Scripted):
         super().__init__(answers)
         self.transient = transient
 
-    def propose(self, messages, temperature, n):
+    def propose(self, request: ProposalRequest) -> list[Proposal]:
         if not self.answers:
-            self.temperatures += [temperature] * n
+            self.temperatures += [request.temperature] * request.n
             raise ProposerError("scripted failure", transient=self.transient)
-        return super().propose(messages, temperature, n)
+        return super().propose(request)
 
 
 def test_a_transient_proposer_failure_is_recorded_and_the_search_goes_on(tmp_path):

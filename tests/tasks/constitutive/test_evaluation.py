@@ -114,18 +114,23 @@ def test_parameter_free_law_is_scored_once():
 #: Code the capture refuses (it never reaches the fit): the reason is the InvalidSolution's.
 REFUSED = {
     "syntax": ("class Physics(nn.Module:\n    pass\n", "does not compile: SyntaxError"),
-    "no class": ("import torch\nx = 1\n", "no class named 'Physics'"),
-    "not a module": ("class Physics:\n    pass\n", "deriving from torch.nn.Module"),
+    "no class": ("import torch\nx = 1\n", "defines no top-level class 'Physics'"),
+    "not a module": ("class Physics:\n    pass\n", "must derive from nn.Module"),
+    "rebound": (
+        "import torch.nn as nn\nclass Physics(nn.Module):\n"
+        "    def forward(self, F):\n        return F\nPhysics = 1\n",
+        "Physics must be a class deriving from torch.nn.Module",
+    ),
     "init needs arguments": (
         "import torch.nn as nn\nclass Physics(nn.Module):\n"
         "    def __init__(self, E):\n        super().__init__()\n"
         "    def forward(self, F):\n        return F\n",
-        "need default values (missing for: E)",
+        "needs a default value (the starting value of the fit); missing for: E",
     ),
     "wrong signature": (
         "import torch.nn as nn\nclass Physics(nn.Module):\n"
         "    def forward(self, F, J):\n        return F\n",
-        "forward must take exactly one tensor F",
+        "forward must take exactly one required argument besides self, the input F",
     ),
     "shape mismatch": (
         "import torch.nn as nn\nclass Physics(nn.Module):\n"

@@ -13,7 +13,7 @@ import torch
 from bridges import laws as torch_laws
 from bridges.linalg import stable_linalg
 from sga_agent.config import SearchConfig
-from sga_agent.parsing import check_code, parse_response
+from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.registry import load_task
 from sga_agent.runner import with_preferred_options
 from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
@@ -49,7 +49,7 @@ def deformations(batch: int = 16, spread: float = 0.15, seed: int = 0) -> torch.
 
 def run_law(code: str) -> tuple[torch.nn.Module, torch.Tensor]:
     """The law's output on F near the identity (F = I included), after a backward pass."""
-    check_code(code, "equation")
+    check_candidate(code, load_task("elastic"))
     law = load_law(code, torch.float64)
     F = torch.cat([torch.eye(3, dtype=torch.float64)[None], deformations()])
     with stable_linalg():

@@ -5,6 +5,7 @@ float64; the laws are the GP's own code); the sandbox has its own tests."""
 from concurrent.futures import Future
 
 from sga_agent.config import SearchConfig
+from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.registry import load_task
 from sga_agent.run_store import RunStore
 from sga_agent.runner import with_preferred_options
@@ -37,7 +38,7 @@ def test_small_gp_search_beats_the_seed(tmp_path):
     GP's preferred option), on a 200-step scene: measured over seeds 0, 1, 2 the best child
     beat the seed law by 1.96x, 2.95x and 1.74x."""
     task = load_task("elastic")
-    proposer = task.builtin_proposer()
+    proposer = BuiltinAdapter(task.builtin_proposer())
     config = SearchConfig(
         task="elastic", proposer="builtin", iterations=1, top_k=4, exploit=1, explore=3,
         epochs=2, task_options={"steps": 200}, workers=1, seed=0,

@@ -7,7 +7,8 @@ import random
 import pytest
 from rdkit import Chem
 
-from sga_agent.parsing import check_code, parse_response
+from sga_agent.parsing import check_candidate, parse_response
+from sga_agent.registry import load_task
 from sga_agent.task import BuiltinProposer, Parent
 from tasks.molecules.constants import SUPPORTED_ELEMENTS
 from tasks.molecules.examples import DRUG_LIKE
@@ -44,7 +45,7 @@ def test_children_are_valid_distinct_answers(parents: list[Parent], temperature:
     for answer in answers:
         assert answer.count("```python") == 1
         code = parse_response(answer).code
-        check_code(code, "entity")
+        check_candidate(code, load_task("homo"))
         checked = check_proposal(parse_solution(code))
         assert len(parse_solution(code).coordinates) == checked.n_heavy
         assert 8 <= checked.n_heavy <= 30

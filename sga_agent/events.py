@@ -1,0 +1,123 @@
+"""The events of a run: one class per line type of a run folder's ``events.jsonl``.
+
+Every event is written as a JSON object whose ``"type"`` is the class's :attr:`Event.type`,
+followed by its fields (``to_dict``); readers compare ``event["type"]`` with those same
+attributes, so each type is spelled once, here. The strings are the run-folder format: runs
+recorded earlier are read back with them, so they never change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+
+@dataclass(frozen=True)
+class Event:
+    """Base of the run events; ``to_dict`` gives the JSON object written to the log."""
+
+    type: ClassVar[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"type": ..., field: value, ...}``; fields that are None are left out."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {"type": self.type, **{k: v for k, v in values.items() if v is not None}}
+
+
+@dataclass(frozen=True)
+class RunStarted(Event):
+    """A run folder was created; ``meta`` (e.g. the proposer) is spread into the event."""
+
+    type: ClassVar[str] = "run_started"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"type": self.type, **self.meta}
+
+
+@dataclass(frozen=True)
+class RunResumed(Event):
+    """A stopped run was continued (on another Ray cluster when ``ray_address`` is set)."""
+
+    type: ClassVar[str] = "resumed"
+    ray_address: str | None = None
+
+
+@dataclass(frozen=True)
+class SandboxReady(Event):
+    """How the run's workers are isolated, and where they run (spread into the event)."""
+
+    type: ClassVar[str] = "sandbox"
+    isolation: dict[str, Any]
+    placement: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"type": self.type, "isolation": self.isolation, **self.placement}
+
+
+@dataclass(frozen=True)
+class SearchStarted(Event):
+    """The search loop began; ``resumed`` when the run already held evaluations."""
+
+    type: ClassVar[str] = "search_started"
+    resumed: bool
+
+
+@dataclass(frozen=True)
+class ProposalReceived(Event):
+    """A proposer's answer for a candidate (``Proposal.to_dict()``)."""
+
+    type: ClassVar[str] = "proposal"
+    candidate: str
+    proposal: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ProposalMissing(Event):
+    """No answer came for a candidate slot."""
+
+    type: ClassVar[str] = "proposal_missing"
+    candidate: str
+
+
+@dataclass(frozen=True)
+class ProposerFailed(Event):
+    """The proposer raised; a ``transient`` failure lets the search go on."""
+
+    type: ClassVar[str] = "proposer_error"
+    error: str
+    transient: bool
+
+
+@dataclass(frozen=True)
+class CandidateEvaluated(Event):
+    """A candidate's finished evaluation (``Evaluation.to_dict()`` without its artifacts)."""
+
+    type: ClassVar[str] = "evaluation"
+    candidate: str
+    evaluation: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class IterationStarted(Event):
+    """An outer iteration begins: its proposals are asked for next."""
+
+    type: ClassVar[str] = "iteration_started"
+    iteration: int
+
+
+@dataclass(frozen=True)
+class IterationDone(Event):
+    """An outer iteration ended; ``top`` holds the heap's best entries' summaries."""
+
+    type: ClassVar[str] = "iteration_done"
+    iteration: int
+    top: list[dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class RunFinished(Event):
+    """The search ended, every iteration run (``stopped`` empty) or stopped by a budget."""
+
+    type: ClassVar[str] = "run_finished"
+    stopped: str

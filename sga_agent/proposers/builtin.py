@@ -1,0 +1,37 @@
+"""A task's built-in (LLM-free) proposer as a :class:`~sga_agent.proposers.base.Proposer`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sga_agent.proposers.base import Proposal, ProposalRequest
+from sga_agent.task import BuiltinProposer
+
+
+class BuiltinAdapter:
+    """Answers a request with ``builtin.propose_from`` (the parents, never the prompt).
+
+    Parameters
+    ----------
+    builtin : BuiltinProposer
+        What a task's ``builtin_proposer()`` returned, e.g. the constitutive tasks' genetic
+        programming ("builtin:gp").
+    """
+
+    def __init__(self, builtin: BuiltinProposer) -> None:
+        self.builtin = builtin
+
+    @property
+    def name(self) -> str:
+        return self.builtin.name
+
+    @property
+    def task_options(self) -> dict[str, Any]:
+        """The task options the built-in proposer is meant to run with (may be empty)."""
+        return dict(getattr(self.builtin, "task_options", {}) or {})
+
+    def propose(self, request: ProposalRequest) -> list[Proposal]:
+        texts = self.builtin.propose_from(
+            list(request.parents), request.temperature, request.n, request.seed
+        )
+        return [Proposal(text, self.name, request.temperature) for text in texts[: request.n]]
