@@ -85,7 +85,7 @@ def event_logs(out: Path) -> dict[Path, bytes]:
     return {path: path.read_bytes() for path in out.glob("*/*/seed-*/*/events.jsonl")}
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_backbones_grid_writes_table_and_chart_and_resumes(tmp_path, registered):
     recorded = tmp_path / "recorded"  # the runs replayed below: one per task and seed
     result = script("backbones", "--tasks", TASKS, "--models", "builtin", "--preset", "cot",
@@ -154,6 +154,7 @@ def test_backbones_grid_writes_table_and_chart_and_resumes(tmp_path, registered)
     assert (out / "table.csv").read_text() == table  # the same seeds give the same results
 
 
+@pytest.mark.slow
 def test_presets_grid_runs_each_preset_with_one_proposer(tmp_path, registered):
     out = tmp_path / "presets"
     args = ["--tasks", "number-a", "--model", "builtin", "--presets", "quick,cot",

@@ -45,6 +45,7 @@ def _observed(scene: tm.Scene) -> np.ndarray:
     return sim.forward()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(MATERIALS))
 def test_torch_laws_through_the_bridge_equal_taichi_mpm(name):
     material = MATERIALS[name]
@@ -73,6 +74,7 @@ def test_torch_laws_through_the_bridge_equal_taichi_mpm(name):
         )
 
 
+@pytest.mark.slow
 def test_segments_and_teacher_forcing_are_consistent():
     """Checkpointed backward equals one-segment backward; teacher forcing at the true state
     changes nothing for the law that generated the observation."""

@@ -4,8 +4,11 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = """
 import json
+
 import torch
 import taichi_mpm as tm
 from bridges.fast_svd import taichi_svd
@@ -37,6 +40,7 @@ print(json.dumps({
 """
 
 
+@pytest.mark.slow
 def test_taichi_svd_in_float32():
     out = subprocess.run(
         [sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True

@@ -116,6 +116,7 @@ def taichi_laws(material: tm.Material, F: np.ndarray) -> tuple[np.ndarray, np.nd
     return F_corrected.to_numpy()[0], stress.to_numpy()[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("material", MATERIALS.values(), ids=MATERIALS.keys())
 def test_torch_laws_equal_taichi_laws(material):
     F = deformations()
@@ -158,6 +159,7 @@ TORCH_LAWS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law", TORCH_LAWS.values(), ids=TORCH_LAWS.keys())
 def test_gradients_match_central_differences(law):
     parameters = dict(law.named_parameters())

@@ -45,6 +45,7 @@ def _fit_gradients(material, scene, observed, resets, batch):
     return result, parameter_gradients(plastic, elastic)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("teacher_forcing", [True, False], ids=["teacher", "free"])
 @pytest.mark.parametrize("name", list(MATERIALS))
 def test_batched_segments_equal_sequential_ones(name, teacher_forcing):
@@ -115,5 +116,6 @@ def test_the_batch_size_follows_the_measured_graph_memory():
     start = State.from_arrays(resets, 0, torch.float64)
     one = segments_per_batch(rollout, start, SEGMENT, 2**40)  # bytes of one segment: 2**40 / one
     per_segment = 2**40 // one
-    assert segments_per_batch(rollout, start, SEGMENT, 3 * per_segment + 1) == 3
+    # half a segment of slack: a second measurement may differ slightly from the first
+    assert segments_per_batch(rollout, start, SEGMENT, int(3.5 * per_segment)) == 3
     assert segments_per_batch(rollout, start, SEGMENT, 0) == 1

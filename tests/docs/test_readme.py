@@ -10,6 +10,7 @@ import pytest
 README = Path(__file__).resolve().parents[2] / "README.md"
 
 
+@pytest.mark.slow
 def test_readme_python_example_runs():
     blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
     assert blocks, "README.md has no python example"
@@ -20,7 +21,7 @@ def test_readme_python_example_runs():
     assert result.returncode == 0, result.stderr[-2000:]
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_readme_sysid_example_runs(tmp_path):
     """The system-identification example: make the observation, then the python block."""
     blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
@@ -44,7 +45,7 @@ def test_readme_sysid_example_runs(tmp_path):
     assert result.returncode == 0, result.stderr[-2000:]
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_readme_bridges_example_runs():
     blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
     example = next(block for block in blocks if "trajectory_loss" in block)

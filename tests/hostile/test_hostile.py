@@ -31,7 +31,10 @@ from sga_agent.task import EvaluationSettings
 from tests.hostile.catalog import load_catalog
 from tests.sga_agent.test_sandbox import ISOLATED, nobody_processes
 
-pytestmark = pytest.mark.skipif(not ISOLATED, reason="the capture cannot be isolated here")
+pytestmark = [
+    pytest.mark.skipif(not ISOLATED, reason="the capture cannot be isolated here"),
+    pytest.mark.slow,  # one pool of sandboxed workers serves every candidate: minutes to start
+]
 
 CATALOG = load_catalog()
 SETTINGS = EvaluationSettings(epochs=1, options={"steps": 20})
@@ -117,6 +120,7 @@ def leaks(evaluation_json: str) -> bool:
     return MARKER in evaluation_json or hexed in evaluation_json or codes in evaluation_json
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("candidate", CATALOG, ids=[c.name for c in CATALOG])
 def test_candidate_cannot_forge_or_leak(candidate, evaluated, refit):
     results, *_ = evaluated
@@ -135,6 +139,7 @@ def test_caches_are_untouched_and_no_process_is_left(evaluated):
     assert not left
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["01", "24", "61"])
 def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
     [candidate] = [c for c in CATALOG if c.name.startswith(f"{name}_")]
@@ -154,7 +159,7 @@ def test_sga_agent_evaluate_takes_the_same_path(name, tmp_path, refit):
     assert not leaks(result.output)
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit):
     """A third of the granular candidates that pass the static checks, in a real search."""
     from sga_agent import registry

@@ -64,6 +64,7 @@ def test_tasks_with_an_empty_registry(monkeypatch):
     assert "no tasks are registered" in result.output
 
 
+@pytest.mark.slow
 def test_evaluate_prints_parameters_loss_and_feedback(tmp_path, in_repo):
     better = law_solution(
         "loss = 0.25\nparameters = {'youngs_modulus': 2e5}\nfeedback = 'fits well'"
@@ -77,6 +78,7 @@ def test_evaluate_prints_parameters_loss_and_feedback(tmp_path, in_repo):
     assert "fits well" in result.output
 
 
+@pytest.mark.slow
 def test_evaluate_json_passes_settings(tmp_path, in_repo):
     args = ["evaluate", "--task", LAW_DOUBLE, "--epochs", "5", "--lr", "0.01", "--json"]
     result = CliRunner().invoke(main, [*args, write(tmp_path, law_solution("loss = 1.5"))])
@@ -95,6 +97,7 @@ def test_evaluate_applies_the_searchs_static_checks(tmp_path, in_repo):
     assert "os" in result.stderr
 
 
+@pytest.mark.slow
 def test_evaluate_invalid_solution_exits_1_with_reason(tmp_path, in_repo):
     file = write(tmp_path, law_solution("raise ValueError('bad law')"))
     result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, file])
@@ -108,6 +111,7 @@ def test_evaluate_invalid_solution_exits_1_with_reason(tmp_path, in_repo):
     assert "ValueError: bad law" in data["extras"]["traceback"]
 
 
+@pytest.mark.slow
 def test_evaluate_timeout_option(tmp_path, in_repo):
     file = write(tmp_path, law_solution("while True:\n    pass"))
     result = CliRunner().invoke(main, ["evaluate", "--task", LAW_DOUBLE, "--timeout", "1", file])
@@ -153,6 +157,7 @@ def test_version():
     assert result.output == f"sga-agent, version {metadata.version('sga-agent')}\n"
 
 
+@pytest.mark.slow
 def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkeypatch):
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
     args = ["search", "--task", "granular", "--model", "openai/gpt-4o", "--out-dir", str(tmp_path)]

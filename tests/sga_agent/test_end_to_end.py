@@ -86,6 +86,7 @@ def environment() -> dict[str, str]:
     return {**os.environ, "OPENAI_API_KEY": KEY}
 
 
+@pytest.mark.slow
 def test_search_end_to_end(tmp_path):
     with ScriptedOpenAIServer(SCRIPT) as server:
         run = subprocess.run(
@@ -134,7 +135,7 @@ def fitted_in_iteration_1(log: Path) -> int:
     return fitted
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_killed_search_resumes_to_the_same_heap(tmp_path):
     """kill -9 once the first evaluation of iteration 1 is stored, resume, compare with a
     replayed run. Each evaluation is stored as it finishes, so the others are still running."""

@@ -145,6 +145,7 @@ def stop(process: subprocess.Popen, signals: int) -> tuple[float, str]:
     return time.monotonic() - start, stderr
 
 
+@pytest.mark.slow
 def test_one_interrupt_stops_the_search_and_resume_finishes_only_the_rest(tmp_path, held_task):
     hold, temporary, env = held_task
     process = start_search(tmp_path / "runs", env)
@@ -174,6 +175,7 @@ def test_one_interrupt_stops_the_search_and_resume_finishes_only_the_rest(tmp_pa
     assert json.loads(resumed.stdout.strip().splitlines()[-1])["evaluations"] == 7
 
 
+@pytest.mark.slow
 def test_a_second_interrupt_exits_at_once(tmp_path, held_task):
     _, temporary, env = held_task
     process = start_search(tmp_path / "runs", env)

@@ -129,6 +129,7 @@ def sandbox_event(store: RunStore) -> dict:
     return next(event for event in store.events() if event["type"] == "sandbox")
 
 
+@pytest.mark.slow
 @needs_ray
 def test_a_search_through_ray_matches_the_local_pool(tmp_path, double_task):
     """Record a search on the local pool, replay its answers through a local Ray instance."""
@@ -204,6 +205,7 @@ def kill_ray_workers(search: Future, waiting: str, hanging: str, release: Path) 
     return killed
 
 
+@pytest.mark.slow
 @needs_ray
 def test_killed_ray_workers_are_retried_once_then_recorded_as_crashed(tmp_path, double_task):
     import ray
@@ -250,7 +252,7 @@ def ray_children(binary: str) -> list[int]:
 
 
 @needs_ray
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_losing_this_machines_ray_node_stops_the_search_unrecorded(tmp_path):
     """Every later task would fail: the search stops, as if killed, and can be resumed.
 

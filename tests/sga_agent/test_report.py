@@ -6,6 +6,7 @@ import json
 import struct
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from sga_agent.cli import main
@@ -95,6 +96,7 @@ def test_molecule_report_draws_the_top_three(tmp_path):
     assert said[1:] == ["plotting the losses...", "drawing the top molecules..."]
 
 
+@pytest.mark.slow
 def test_motion_picture_is_drawn_from_the_fit_artifact_never_from_code(tmp_path):
     from tasks.constitutive.artifacts import encode_positions
     from tasks.constitutive.evaluation import ensure_runtime, ground_truth

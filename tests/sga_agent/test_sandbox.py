@@ -252,6 +252,7 @@ def test_task_that_cannot_be_loaded_is_an_error(task, reason):
     assert reason in evaluation.reason
 
 
+@pytest.mark.slow
 def test_pool_survives_every_failure_and_keeps_input_order(tmp_path):
     outside = tmp_path / "outside.txt"
     solutions = [INFINITE_LOOP, MEMORY_BOMB, SEGFAULT, writer(outside), "loss = 0.5\n"]

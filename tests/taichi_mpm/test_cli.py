@@ -30,6 +30,7 @@ def png_size(path: Path) -> tuple[int, int]:
     return struct.unpack(">II", data[16:24])
 
 
+@pytest.mark.slow
 def test_demo_writes_png(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     # float64 keeps the session's runtime (tests/conftest.py) as the other tests expect.
@@ -111,7 +112,7 @@ def test_help_comes_without_taichis_banner_and_version_is_known():
     assert version.output == f"taichi-mpm, version {metadata.version('sga-agent')}\n"
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_warmup_compiles_and_reports():
     result = CliRunner().invoke(main, ["warmup", "--precision", "float64"])
     assert result.exit_code == 0, result.output

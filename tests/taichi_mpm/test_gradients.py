@@ -55,6 +55,7 @@ def assert_matches_central_difference(analytic: float, loss_at, scale: float, na
     raise AssertionError(f"{name}: autodiff {analytic!r} vs central differences {estimates}")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(MATERIALS))
 def test_material_parameter_gradients_match_finite_differences(name):
     scene, material = impact_scene(), MATERIALS[name]
@@ -89,7 +90,7 @@ def test_initial_velocity_gradient_matches_finite_differences():
         )
 
 
-@pytest.mark.slow  # compiles the parallel variant of every kernel: minutes
+@pytest.mark.heavy  # compiles the parallel variant of every kernel: minutes
 def test_parallel_loops_give_the_serial_results():
     """The parallel forward kernel and parallel reverse kernels agree with the serial ones."""
     scene, material = impact_scene(), MATERIALS["von_mises"]

@@ -401,6 +401,7 @@ def sand_runout(friction_angle: float):
     }
 
 
+@pytest.mark.slow
 def test_sand_column_runs_out_farther_at_a_smaller_friction_angle():
     """A 4 x 10 x 4-cell Drucker-Prager column collapses on a rough floor (Coulomb 0.5).
 

@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 import taichi_mpm as tm
 
@@ -19,6 +20,7 @@ print(json.dumps(positions.tolist()))
 """
 
 
+@pytest.mark.slow
 def test_float32_trajectory_matches_float64():
     out = subprocess.run(
         [sys.executable, "-c", SCRIPT, "float32"], check=True, capture_output=True, text=True

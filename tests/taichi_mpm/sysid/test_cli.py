@@ -22,6 +22,8 @@ from taichi_mpm.sysid.families import (
     parse_assignment,
 )
 
+pytestmark = pytest.mark.slow  # each command simulates an observation first
+
 REPO_ROOT = Path(__file__).resolve().parents[3]
 SCRIPT = REPO_ROOT / "scripts" / "make_observation.py"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -50,6 +52,7 @@ def observed(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_make_observation_writes_a_loadable_file(observed):
     observation = load_observation(observed)
     assert observation.positions.shape == (6, 125, 3)
@@ -57,6 +60,7 @@ def test_make_observation_writes_a_loadable_file(observed):
     assert observation.scene.dt == 4e-4 and observation.scene.grid_resolution == 16
 
 
+@pytest.mark.slow
 def test_sysid_recovers_youngs_modulus(observed, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     args = [
@@ -154,6 +158,7 @@ def test_sysid_help_lists_families():
         assert name in result.output
 
 
+@pytest.mark.slow
 def test_make_observation_subset_and_noise(tmp_path):
     path = tmp_path / "sand.npz"
     args = ["--material", "sand", "--param", "friction_angle=35", "--steps", "30", "--frames", "3"]

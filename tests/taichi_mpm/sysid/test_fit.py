@@ -6,6 +6,8 @@ import pytest
 import taichi_mpm as tm
 from taichi_mpm.sysid import FitError, fit, observation_from_times
 
+pytestmark = pytest.mark.slow  # fits of a simulated observation: seconds each
+
 FRAMES = np.arange(10, 151, 10)
 
 
@@ -31,7 +33,7 @@ def relative_errors(found: dict, truth: dict) -> dict:
     return {name: abs(found[name] / truth[name] - 1.0) for name in found}
 
 
-@pytest.mark.parametrize("optimizer", ["lbfgs", pytest.param("adam", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("optimizer", ["lbfgs", pytest.param("adam", marks=pytest.mark.heavy)])
 def test_neo_hookean_E_and_nu_recovered_from_guesses_off_by_3x(optimizer):
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     observation = synthetic(truth)
@@ -51,6 +53,7 @@ def test_neo_hookean_E_and_nu_recovered_from_guesses_off_by_3x(optimizer):
     assert result.loss_curve[-1] < 1e-3 * result.loss_curve[0]
 
 
+@pytest.mark.slow
 def test_neo_hookean_recovered_under_one_percent_noise():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     observation = synthetic(truth, noise=0.01)
@@ -82,7 +85,7 @@ PLASTIC_CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(PLASTIC_CASES))
-@pytest.mark.parametrize("noise", [0.0, pytest.param(0.01, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("noise", [0.0, pytest.param(0.01, marks=pytest.mark.heavy)])
 def test_plastic_parameters_recovered(case, noise):
     truth, name, guess = PLASTIC_CASES[case]
     observation = synthetic(truth, noise=noise)
@@ -109,7 +112,7 @@ def test_fit_rejects_unknown_parameters_and_optimizers():
         fit(observation, material, optimizer="sgd")
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_initial_velocity_fitted_jointly_when_not_observed():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     observation = synthetic(truth)
@@ -131,6 +134,7 @@ def test_initial_velocity_fitted_jointly_when_not_observed():
     assert abs(result.values["E"] / 5e4 - 1) < 0.02, result.values
 
 
+@pytest.mark.slow
 def test_unstable_step_backs_off_instead_of_crashing():
     """A huge first step makes E 3000x too stiff for dt: the fit halves its step and goes on."""
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
@@ -148,7 +152,7 @@ def test_unstable_step_backs_off_instead_of_crashing():
     assert np.isfinite(result.loss) and result.loss < result.loss_curve[0]
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_fit_from_a_subset_of_particles_and_sparse_frames():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     scene = thrown_cube()

@@ -10,7 +10,7 @@ from tests.taichi_mpm.sysid.test_fit import synthetic
 LBFGS = {"optimizer": "lbfgs", "learning_rate": 0.5, "tolerance": 1e-7}
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_impact_determines_E_and_nu_and_restarts_agree():
     truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
     result = identify(
@@ -44,6 +44,7 @@ def test_free_flight_says_the_elastic_parameters_are_not_identified():
     assert not np.isfinite(result.relative_std["E"])
 
 
+@pytest.mark.slow
 def test_fluid_determines_only_its_bulk_modulus_not_E_and_nu_apart():
     """F is reset to J^(1/3) I, so only K = E / (3 (1 - 2 nu)) acts: the fit finds K and
     reports that E and nu cannot be separated."""

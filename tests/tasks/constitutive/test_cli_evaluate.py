@@ -33,6 +33,7 @@ BROKEN = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(BROKEN))
 def test_broken_law_files(case, tmp_path):
     code, reason = BROKEN[case]
@@ -50,6 +51,7 @@ def test_broken_law_files(case, tmp_path):
     assert "Traceback" not in run.stderr + run.stdout
 
 
+@pytest.mark.slow
 def test_task_options_reach_the_evaluation():
     law = Path(__file__).resolve().parents[3] / "examples" / "laws" / "von_mises.py"
     command = [sys.executable, "-m", "sga_agent", "evaluate", "--task", "plasticine", str(law)]

@@ -34,6 +34,7 @@ def score(name: str, code: str, epochs: int = 0, **settings) -> object:
     return task.evaluate(task.capture(code), EvaluationSettings(epochs=epochs, **settings))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(TRUTH))
 def test_truth_scores_noise_and_seed_scores_worse(name):
     task = load_task(name)
@@ -72,11 +73,12 @@ IMAGINARY_START = {
         ("elastic", {"log_youngs_modulus": 13.0 + math.log(2.0), "poissons_ratio": 0.1225}, 16,
          0.08),
         pytest.param("plasticine", {"log_yield_stress": math.log(6e4)}, 7, 0.15,
-                     marks=pytest.mark.slow),
+                     marks=pytest.mark.heavy),
         pytest.param("imaginary", IMAGINARY_START, 15, None,  # the task's L-BFGS: no rate
-                     marks=pytest.mark.slow),
+                     marks=pytest.mark.heavy),
     ],
 )  # fmt: skip
+@pytest.mark.slow
 def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epochs, learning_rate):
     """Fewer epochs (at a larger step, for Adam) than the task's 30, to fit the test budget;
     scripts/make_ground_truth.py --fit checks the task's settings on the full scene."""
@@ -89,6 +91,7 @@ def test_inner_optimization_recovers_parameters_started_2x_off(name, start, epoc
     assert set(start) <= set(result.parameters)
 
 
+@pytest.mark.slow
 def test_lbfgs_steps_back_from_a_trial_point_that_blows_up():
     """A unit step in log_scale (the first L-BFGS trial) makes the scene explode: the line
     search must shrink the step rather than stop, and the feedback says so."""
@@ -105,6 +108,7 @@ def test_lbfgs_steps_back_from_a_trial_point_that_blows_up():
     assert "L-BFGS" in result.feedback
 
 
+@pytest.mark.slow
 def test_parameter_free_law_is_scored_once():
     result = score("fluid", (LAWS / "fluid.py").read_text().replace("nn.Parameter(", "("), 30)
     assert result.valid and result.curves["loss"] == [result.loss]
@@ -260,7 +264,7 @@ ONE_SENTENCE = (
 )
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.parametrize(("stress", "unused"), [(NEITHER, 2), (ONE, 1)])
 def test_a_parameter_the_loss_ignores_is_named_in_one_sentence(stress, unused):
     """Fitted, not "element 0 of tensors does not require grad"."""

@@ -26,6 +26,7 @@ def gp_law() -> str:
     return text.split("```python\n", 1)[1].split("```", 1)[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "code", [(LAWS / "neo_hookean.py").read_text(), gp_law()], ids=["neo_hookean", "gp"]
 )
@@ -57,6 +58,7 @@ class Physics(nn.Module):
     assert with_fitted_values("not python (", {"k": 1.0}) == "not python ("
 
 
+@pytest.mark.slow
 def test_the_task_drops_the_stale_genome_tag_of_a_gp_law():
     code = gp_law()
     fitted = {name: value + 1.0 for name, value in parameter_values(code).items()}

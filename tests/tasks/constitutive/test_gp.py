@@ -351,6 +351,7 @@ def test_the_search_is_not_handed_the_ground_truth():
                     assert module.startswith("tasks.constitutive.gp"), module
 
 
+@pytest.mark.slow
 def test_gp_laws_are_scored_by_the_simulation():
     """Three GP individuals of the granular task through the real inner optimization."""
     task = load_task("granular")

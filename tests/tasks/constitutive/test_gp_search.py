@@ -4,6 +4,8 @@ float64; the laws are the GP's own code); the sandbox has its own tests."""
 
 from concurrent.futures import Future
 
+import pytest
+
 from sga_agent.config import SearchConfig
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.registry import load_task
@@ -33,6 +35,7 @@ class InProcess:
         return future
 
 
+@pytest.mark.slow
 def test_small_gp_search_beats_the_seed(tmp_path):
     """One iteration of four children, fitted as `sga-agent search` fits them (L-BFGS, the
     GP's preferred option), on a 200-step scene: measured over seeds 0, 1, 2 the best child

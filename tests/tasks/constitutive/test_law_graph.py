@@ -108,7 +108,7 @@ def test_example_and_seed_laws_are_captured_faithfully(name):
     assert_graph_reproduces(KNOWN_LAWS[name])
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", ["elastic", "plastic"])
 def test_gp_laws_are_captured_faithfully(kind):
     rng = random.Random(21)

@@ -29,6 +29,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_cli_evaluates_a_molecule_answer(tmp_path: Path) -> None:
     answer = tmp_path / "answer.md"
     answer.write_text("### Code\n```python\n" + HomoTask().seed_solution() + "```\n")
@@ -49,7 +50,7 @@ def test_cli_reports_an_invalid_molecule(tmp_path: Path) -> None:
     assert "Traceback" not in run.stderr + run.stdout
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_twenty_drug_like_molecules_evaluate() -> None:
     assert len(DRUG_LIKE) == 20
     task = HomoTask()
@@ -59,7 +60,7 @@ def test_twenty_drug_like_molecules_evaluate() -> None:
         assert evaluation.extras["geometry_source"] == "proposal", name
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.skipif(importlib.util.find_spec("qm9pack") is None, reason="qm9pack not installed")
 def test_calibration_script_on_a_sample_agrees_with_the_shipped_fit() -> None:
     script = ROOT / "scripts" / "calibrate_qm9.py"

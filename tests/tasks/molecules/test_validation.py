@@ -34,7 +34,7 @@ INVALID = [
     (format_solution(SMILES, _coords(10)), "10 rows but the SMILES has 11 heavy atoms"),
     (format_solution(SMILES, _coords(12)), "12 rows"),
     (format_solution(SMILES, [[0.0, 0.0, 0.0]] * 2 + _coords(11)[2:]), "overlap"),
-    ("SMILES = 'CCCCCCCC'\ncoordinates = [[float('nan'), 0, 0]] * 8", "literal list"),
+    ("SMILES = 'CCCCCCCC'\ncoordinates = [[float('nan'), 0, 0]] * 8", "must be a literal"),
     ("no code here at all", "not valid Python"),
     ("x = 1", "must assign"),
 ]

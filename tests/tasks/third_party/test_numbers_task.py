@@ -61,6 +61,7 @@ def test_the_registry_finds_the_task_through_its_entry_point(installed: dict[str
     assert task.kind == "entity" and task.seed_solution() == "[0, 0, 0]\n"
 
 
+@pytest.mark.slow
 def test_a_replayed_search_runs_the_third_party_task_end_to_end(
     tmp_path: Path, installed: dict[str, str]
 ) -> None:
