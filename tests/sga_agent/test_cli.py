@@ -1,6 +1,7 @@
 """The ``sga-agent`` command line: task listing, evaluation output and exit codes."""
 
 import json
+import re
 from importlib import metadata
 from importlib.metadata import EntryPoint
 from pathlib import Path
@@ -190,3 +191,15 @@ def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):
 def test_extract_solution_takes_the_last_python_block():
     assert extract_solution("a\n```python\nx = 1\n```\n```python\nx = 2\n```\n") == "x = 2\n"
     assert extract_solution("x = 3\n") == "x = 3\n"
+
+
+def test_search_help_writes_every_default_one_way():
+    """Defaults read "[default: ...]", from SearchConfig and the presets, never "[0.5]"."""
+    from sga_agent.config import PRESETS, SearchConfig
+
+    help_text = CliRunner().invoke(main, ["search", "--help"], terminal_width=400).output
+    assert "Default:" not in help_text and not re.search(r"\[\d", help_text)
+    assert f"[default: {SearchConfig.timeout_s}; x>=1]" in help_text
+    iterations = f"{PRESETS['sga']['iterations']} (sga), {PRESETS['quick']['iterations']} (quick)"
+    assert f"Outer iterations.  [default: ({iterations}); x>=1]" in help_text
+    assert "--out-dir DIRECTORY" in help_text and "--out " not in help_text

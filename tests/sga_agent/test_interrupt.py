@@ -174,6 +174,13 @@ def test_one_interrupt_stops_the_search_and_resume_finishes_only_the_rest(tmp_pa
     assert sorted(after) == sorted(set(after))  # nothing evaluated twice
     assert json.loads(resumed.stdout.strip().splitlines()[-1])["evaluations"] == 7
 
+    again = subprocess.run(
+        [sys.executable, "-m", "sga_agent", "resume", str(run), "--json"],
+        capture_output=True, text=True, timeout=300, env=env,
+    )  # fmt: skip
+    assert again.returncode == 0 and "this run had finished" in again.stderr
+    assert evaluations(run) == after  # nothing evaluated again
+
 
 @pytest.mark.slow
 def test_a_second_interrupt_exits_at_once(tmp_path, held_task):
