@@ -10,7 +10,9 @@ asking the model again or re-evaluating what was finished.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import sys
 from collections.abc import Callable
 from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
@@ -311,4 +313,15 @@ class Search:
             "evaluations": result.totals.evaluations,
             "valid": result.totals.valid,
             "invalid": result.totals.invalid,
+            "findings": self._findings(),
         }
+
+    def _findings(self) -> dict[str, Any]:
+        """What the run found (:mod:`sga_agent.report.findings`): the best loss against the
+        seed's and the true law's, the best solution with its fitted constants, the task's
+        assessment with the free run. Read back from the run folder, as the report does."""
+        from sga_agent.report.data import read_run
+        from sga_agent.report.findings import find
+
+        with contextlib.redirect_stdout(sys.stderr):  # stdout may carry --json (Taichi prints)
+            return find(read_run(self.store.path), self.task).to_dict()

@@ -162,6 +162,50 @@ def options_type(task: object) -> type:
     return getattr(task, "options_type", NoOptions)
 
 
+@dataclass
+class FreeRun:
+    """A solution simulated from the initial state without teacher forcing, against the
+    observation: the root-mean-square position error at the last step and averaged over the
+    steps, in units of the body's size (``body_size``, m); infinite when the simulation blew up
+    (``unstable`` says where). ``frames`` are steps at which ``positions`` and ``observed``
+    ((frames, N, 3) arrays, for pictures; not part of :meth:`to_dict`) were kept."""
+
+    final_error: float
+    mean_error: float
+    body_size: float
+    steps: int
+    frames: list[int] = field(default_factory=list)
+    positions: Any = None
+    observed: Any = None
+    unstable: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The numbers, JSON-ready (an infinite error as the string "inf")."""
+        return {
+            "final_error": _encode_float(self.final_error),
+            "mean_error": _encode_float(self.mean_error),
+            "body_size": self.body_size, "steps": self.steps, "unstable": self.unstable,
+        }  # fmt: skip
+
+
+@dataclass
+class Assessment:
+    """What only the task knows about a run's best solution (``Task.assess``): the ground
+    truth's name and its loss when scored like a candidate, values derived from the fitted
+    parameters that read better than them (``{"exp(log_E)": 4.4e5}``), and the free run."""
+
+    truth: str = ""
+    truth_loss: float | None = None
+    derived: dict[str, float] = field(default_factory=dict)
+    free_run: FreeRun | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "truth": self.truth, "truth_loss": self.truth_loss, "derived": self.derived,
+            "free_run": None if self.free_run is None else self.free_run.to_dict(),
+        }  # fmt: skip
+
+
 def solution_with_parameters(task: object, solution: str, parameters: dict[str, float]) -> str:
     """``solution`` with its fitted ``parameters`` written in, where ``task`` knows how (its
     ``solution_with_parameters``); else ``solution`` unchanged."""
@@ -196,6 +240,13 @@ class Task(Protocol):
     ``solution_with_parameters(solution: str, parameters: dict) -> str``, also optional,
     writes fitted parameter values into a solution for people to read (the end of a search,
     reports); it must not run the solution's code.
+
+    ``assess(artifacts: dict | None, parameters: dict, options: dict, simulate: bool) ->
+    Assessment``, optional, tells summaries and reports what only the task knows about the
+    best solution, given the artifacts its evaluation left (the captured data included), its
+    fitted parameters and the run's task options: the ground truth's name and loss, readable
+    derived values, and (if ``simulate``) a :class:`FreeRun`. It is trusted code: it must not
+    load or run the solution's code, only what the capture recorded.
     """
 
     name: str

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import json
+import sys
 from pathlib import Path
 
 import click
@@ -26,20 +29,29 @@ def _say(text: str) -> None:
 @click.option(
     "--no-motion",
     is_flag=True,
-    help="Constitutive tasks: skip re-simulating the best law for the motion picture.",
+    help="Constitutive tasks: skip the free run of the best law (its error and pictures).",
 )
-def report(run_dir: Path, out: Path | None, no_motion: bool) -> None:
+@click.option("--json", "as_json", is_flag=True, help="Print the findings and the files as JSON.")
+def report(run_dir: Path, out: Path | None, no_motion: bool, as_json: bool) -> None:
     """Write report.md and report.html (with PNG figures) for the run in RUN_DIR.
 
-    Sections: summary, best loss per iteration, outcomes per iteration, inner-loop curves of
-    the top 3, the best solution's code and feedback, and a task picture (the motion of the best
-    law against the observation, or the top molecules).
+    It leads with a summary (the best loss against the seed's and the true law's, the ground
+    truth, the best solution with its fitted constants, the free-run error of a law or the top
+    molecules), then the free run or the molecules, the bilevel picture, the best loss against
+    evaluations and time, the inner-loop curves of the top 3 distinct solutions and the
+    outcomes; the settings, isolation record and raw feedback come last, folded.
     """
     from sga_agent.report import build_report
 
-    try:
-        paths = build_report(run_dir, out, motion=not no_motion, say=_say)
+    try:  # with --json, stdout is for the JSON alone (Taichi announces itself there)
+        with contextlib.redirect_stdout(sys.stderr if as_json else sys.stdout):
+            paths, findings = build_report(run_dir, out, motion=not no_motion, say=_say)
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
+    if as_json:
+        files = [str(path) for path in paths]
+        click.echo(json.dumps({"run": str(run_dir), "files": files,
+                               "findings": findings.to_dict()}, default=str))  # fmt: skip
+        return
     for path in paths:
         click.echo(str(path))

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sga_agent.events import ProposalReceived, SandboxReady
+from sga_agent.events import CandidateEvaluated, ProposalReceived, SandboxReady
 from sga_agent.run_store import CONFIG, SUMMARY, RunStore
 
 
@@ -26,6 +26,7 @@ class Candidate:
     feedback: str = ""
     curves: dict[str, list[float]] = field(default_factory=dict)
     folder: Path | None = None
+    time: float | None = None  # when its evaluation was recorded (seconds since the epoch)
 
     def artifacts(self) -> dict[str, Any]:
         """What the trusted fit left for reports (read when asked: it can be large)."""
@@ -48,6 +49,7 @@ class Run:
     summary: dict[str, Any] | None = None
     tokens: int = 0
     cost_usd: float = 0.0
+    started: float | None = None  # the first event's time (seconds since the epoch)
 
     @property
     def task(self) -> str:
@@ -116,8 +118,13 @@ def read_run(path: Path) -> Run:
         candidates=candidates,
         summary=_read_json(store.path / SUMMARY, None),
     )
+    by_id = {candidate.id: candidate for candidate in candidates}
     for event in store.events():
-        if event.get("type") == SandboxReady.type:
+        if run.started is None and isinstance(event.get("time"), int | float):
+            run.started = float(event["time"])
+        if event.get("type") == CandidateEvaluated.type and event.get("candidate") in by_id:
+            by_id[event["candidate"]].time = event.get("time")
+        elif event.get("type") == SandboxReady.type:
             run.sandbox = event.get("isolation")
         elif event.get("type") == ProposalReceived.type:
             proposal = event.get("proposal", {})

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from sga_agent.registry import task_entry_points
 from sga_agent.report.data import Candidate, Run
 from sga_agent.report.plots import DPI, new_figure, save
+from sga_agent.task import FreeRun
 
 LOSS_LABELS = {
     "constitutive": "loss: mean squared position error (m²)",
@@ -37,26 +38,6 @@ def loss_label(task: str) -> str:
 # ---------------------------------------------------------------------- constitutive motion
 
 
-def best_motion(run: Run, best: Candidate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Steps, observed and fitted positions (frames, N, 3) of the best law.
-
-    The fitted positions are the trajectory the trusted fit recorded at the best epoch (its
-    ``trajectory`` artifact); the report never loads the candidate's code. The observation is
-    the task's ground truth, read from its cache.
-    """
-    from tasks.constitutive.artifacts import decode_positions
-    from tasks.constitutive.evaluation import ensure_runtime, ground_truth
-    from tasks.constitutive.specs import SPECS
-
-    artifact = best.artifacts().get("trajectory")
-    if artifact is None:
-        raise ValueError(f"{best.id} has no recorded trajectory (a run from an older version?)")
-    steps, fitted = decode_positions(artifact)
-    ensure_runtime("float32")
-    observed = ground_truth(SPECS[run.task], run.config.get("task_options", {}).get("steps"))
-    return steps, observed.positions[steps], fitted
-
-
 def _limits(positions: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
     low, high = positions[..., :2].min(axis=(0, 1)), positions[..., :2].max(axis=(0, 1))
     pad = 0.05 * (high - low).max()
@@ -75,21 +56,21 @@ def _panel(axes, points: np.ndarray, limits, title: str, colour: str) -> None:
     axes.set_ylabel("y (m)")
 
 
-def plot_motion(run: Run, best: Candidate, folder: Path) -> tuple[Path, Path]:
-    """Ground truth above, the best law below, at a few steps (PNG); every recorded frame as a
-    GIF (the fitted motion is the best epoch's, as the fit recorded it: teacher-forced)."""
+def plot_motion(run: Run, best: Candidate, free: FreeRun, folder: Path) -> tuple[Path, Path]:
+    """The observation above, the best law's free run below, at a few steps (PNG); every kept
+    frame of both as a GIF."""
     from matplotlib.animation import PillowWriter
 
-    steps, truth, simulated = best_motion(run, best)
+    steps, truth, simulated = free.frames, free.observed, free.positions
     limits = _limits(truth)
     frames = np.linspace(0, len(steps) - 1, MOTION_FRAMES).round().astype(int)
     figure = new_figure(2.8 * MOTION_FRAMES, 6.0)
     grid = figure.subplots(2, MOTION_FRAMES)
     for column, frame in enumerate(frames):
         step = steps[frame]
-        _panel(grid[0, column], truth[frame], limits, f"ground truth, step {step}", "#264653")
+        _panel(grid[0, column], truth[frame], limits, f"observed, step {step}", "#264653")
         _panel(grid[1, column], simulated[frame], limits, f"{best.id}, step {step}", "#e76f51")
-    figure.suptitle(f"{run.task}: observed motion vs the best law (x-y projection)")
+    figure.suptitle(f"{run.task}: observed motion vs the best law's free run (x-y projection)")
     png = save(figure, folder / "motion.png")
 
     animation: Figure = new_figure(8.0, 4.2)
@@ -98,7 +79,7 @@ def plot_motion(run: Run, best: Candidate, folder: Path) -> tuple[Path, Path]:
     gif = folder / "motion.gif"
     with writer.saving(animation, str(gif), dpi=100):
         for frame, step in enumerate(steps):
-            _panel(left, truth[frame], limits, f"ground truth, step {step}", "#264653")
+            _panel(left, truth[frame], limits, f"observed, step {step}", "#264653")
             _panel(right, simulated[frame], limits, f"{best.id}, step {step}", "#e76f51")
             animation.tight_layout()
             writer.grab_frame()

@@ -1,4 +1,5 @@
-"""The search figures: best loss per iteration, outcomes per iteration, inner-loop curves.
+"""The search figures: the bilevel zigzag, the best loss against evaluations and wall time and
+per iteration, outcomes per iteration, inner-loop curves.
 
 Figures are drawn on :class:`matplotlib.figure.Figure` objects (the Agg canvas, no pyplot state,
 no display) at a fixed size so that a paper can place them as they are.
@@ -101,6 +102,94 @@ def plot_outcomes(run: Run, path: Path) -> Path:
     return save(figure, path)
 
 
+def evaluated_in_order(run: Run) -> list[Candidate]:
+    """The candidates in the order their evaluations were recorded (by id where no time)."""
+    return sorted(run.candidates, key=lambda c: (c.time is None, c.time or 0.0, c.id))
+
+
+def plot_zigzag(run: Run, path: Path, loss_label: str) -> Path:
+    """The bilevel picture (the paper's Figure 3): each candidate's loss at its proposed
+    constants (the inner loop's first epoch) and after fitting, joined in evaluation order."""
+    figure = new_figure(9.0, 4.2)
+    axes = figure.add_subplot()
+    xs, ys, proposed, fitted, failed = [], [], [], [], []
+    boundaries, last_iteration = [], None
+    for index, candidate in enumerate(evaluated_in_order(run)):
+        losses = candidate.curves.get("loss") or []
+        if candidate.iteration != last_iteration and index:
+            boundaries.append(index - 0.25)
+        last_iteration = candidate.iteration
+        if candidate.status != "ok" or not losses or not math.isfinite(candidate.loss):
+            failed.append(index)
+            continue
+        start = losses[0] if math.isfinite(losses[0]) else candidate.loss
+        xs += [index, index + 0.5]
+        ys += [start, candidate.loss]
+        proposed.append((index, start))
+        fitted.append((index + 0.5, candidate.loss))
+    axes.plot(xs, ys, "-", color="#8d99ae", linewidth=1, zorder=1)
+    if proposed:
+        axes.scatter(*zip(*proposed, strict=True), s=30, facecolors="white",
+                     edgecolors="#e76f51", label="proposed constants", zorder=2)  # fmt: skip
+        axes.scatter(*zip(*fitted, strict=True), s=30, color="#264653",
+                     label="after the inner optimisation", zorder=3)  # fmt: skip
+        if all(y > 0 for y in ys):
+            axes.set_yscale("log")
+        axes.legend()
+    else:
+        axes.text(0.5, 0.5, "no scored candidate", ha="center", transform=axes.transAxes)
+    if failed:  # along the bottom edge: no loss to draw, but the gap is explained
+        axes.scatter(failed, [0.02] * len(failed), marker="x", color="#9c27b0",
+                     transform=axes.get_xaxis_transform(), label="not scored")  # fmt: skip
+        axes.legend()
+    for x in boundaries:
+        axes.axvline(x, color="#bbbbbb", linestyle=":", linewidth=1)
+    axes.xaxis.get_major_locator().set_params(integer=True)
+    axes.set_xlabel("evaluation, in order (0 = seed; dotted lines between iterations)")
+    axes.set_ylabel(loss_label)
+    axes.set_title(f"{run.task}: loss before and after fitting each candidate")
+    axes.grid(True, which="major", alpha=0.3)
+    return save(figure, path)
+
+
+def best_so_far(run: Run) -> list[tuple[Candidate, float]]:
+    """Each candidate in evaluation order with the best finite loss found up to it."""
+    best, found = math.inf, []
+    for candidate in evaluated_in_order(run):
+        if candidate.status == "ok" and math.isfinite(candidate.loss):
+            best = min(best, candidate.loss)
+        found.append((candidate, best))
+    return found
+
+
+def plot_progress(run: Run, path: Path, loss_label: str) -> Path:
+    """The best loss so far against evaluations (left) and against wall time (right)."""
+    figure = new_figure(11.0, 4.0)
+    by_count, by_time = figure.subplots(1, 2)
+    steps = [(i + 1, best) for i, (_, best) in enumerate(best_so_far(run)) if math.isfinite(best)]
+    if steps:
+        by_count.step(*zip(*steps, strict=True), where="post", color="#264653", marker="o",
+                      markersize=3)  # fmt: skip
+    timed = [
+        ((c.time - run.started) / 60, best) for c, best in best_so_far(run)
+        if c.time is not None and run.started is not None and math.isfinite(best)
+    ]  # fmt: skip
+    if timed:
+        by_time.step(*zip(*timed, strict=True), where="post", color="#2a9d8f", marker="o",
+                     markersize=3)  # fmt: skip
+    else:
+        by_time.text(0.5, 0.5, "no times recorded", ha="center", transform=by_time.transAxes)
+    for axes, label in ((by_count, "evaluations"), (by_time, "wall time since the start (min)")):
+        if steps and all(best > 0 for _, best in steps):
+            axes.set_yscale("log")
+        axes.set_xlabel(label)
+        axes.set_ylabel(loss_label if axes is by_count else "")
+        axes.grid(True, which="both", alpha=0.3)
+    by_count.xaxis.get_major_locator().set_params(integer=True)
+    figure.suptitle(f"{run.task}: best loss so far")
+    return save(figure, path)
+
+
 def curves_size(candidates: list[Candidate]) -> tuple[float, float]:
     """The inner-loop figure's size in inches for these candidates."""
     return CURVES_WIDTH, CURVES_ROW_HEIGHT * max(1, len(candidates))
@@ -140,5 +229,5 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
         figure.add_subplot().text(0.5, 0.5, "no scored candidate", ha="center")
     hidden = any(len(c.curves) - 1 > MAX_PARAMETER_PANELS for c in candidates)
     note = f"; first {MAX_PARAMETER_PANELS} parameters shown, all in curves.json" if hidden else ""
-    figure.suptitle(f"Inner-loop optimisation of the top candidates\n{loss_label}{note}")
+    figure.suptitle(f"Inner-loop optimisation of the top distinct solutions\n{loss_label}{note}")
     return save(figure, path)

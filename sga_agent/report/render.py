@@ -30,13 +30,13 @@ class Code:
     language: str = ""
 
 
-Block = Text | Table | Image | Code
-
-
 @dataclass
 class Section:
+    """A titled part of the report; ``collapsed`` ones are folded away (``<details>``)."""
+
     title: str
-    blocks: list[Block] = field(default_factory=list)
+    blocks: list[Text | Table | Image | Code] = field(default_factory=list)
+    collapsed: bool = False
 
 
 def _fence(text: str) -> str:
@@ -48,7 +48,10 @@ def markdown(title: str, sections: list[Section]) -> str:
     """The report as Markdown."""
     lines = [f"# {title}", ""]
     for section in sections:
-        lines += [f"## {section.title}", ""]
+        if section.collapsed:  # GitHub renders the Markdown inside, blank lines around it
+            lines += ["<details>", f"<summary><b>{html.escape(section.title)}</b></summary>", ""]
+        else:
+            lines += [f"## {section.title}", ""]
         for block in section.blocks:
             if isinstance(block, Text):
                 lines += [block.text, ""]
@@ -62,12 +65,15 @@ def markdown(title: str, sections: list[Section]) -> str:
             else:
                 fence = _fence(block.text)
                 lines += [f"{fence}{block.language}", block.text.rstrip("\n"), fence, ""]
+        if section.collapsed:
+            lines += ["</details>", ""]
     return "\n".join(lines)
 
 
 STYLE = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
-pre{background:#f4f4f4;padding:1em;overflow-x:auto}img{max-width:100%}"""
+pre{background:#f4f4f4;padding:1em;overflow-x:auto}img{max-width:100%}
+details{margin:1em 0}summary{cursor:pointer;font-size:1.2em}"""
 
 
 def _inline(text: str) -> str:
@@ -82,7 +88,10 @@ def to_html(title: str, sections: list[Section]) -> str:
     """The report as one static HTML page."""
     body = [f"<h1>{html.escape(title)}</h1>"]
     for section in sections:
-        body.append(f"<h2>{html.escape(section.title)}</h2>")
+        if section.collapsed:
+            body.append(f"<details><summary><b>{html.escape(section.title)}</b></summary>")
+        else:
+            body.append(f"<h2>{html.escape(section.title)}</h2>")
         for block in section.blocks:
             if isinstance(block, Text):
                 items = block.text.split("\n")
@@ -103,6 +112,8 @@ def to_html(title: str, sections: list[Section]) -> str:
                             f'alt="{html.escape(block.alt)}"></p>')  # fmt: skip
             else:
                 body.append(f"<pre><code>{html.escape(block.text)}</code></pre>")
+        if section.collapsed:
+            body.append("</details>")
     return (
         '<!DOCTYPE html>\n<html><head><meta charset="utf-8">'
         f"<title>{html.escape(title)}</title><style>{STYLE}</style></head>\n<body>\n"

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sga_agent.task import BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
 from tasks.constitutive import prompt_text
 from tasks.constitutive.law_shape import check_law
 from tasks.constitutive.options import ConstitutiveOptions
@@ -84,6 +84,19 @@ class ConstitutiveTask:
         lines = solution.splitlines(keepends=True)
         untagged = "".join(line for line in lines if not line.startswith(GENOME_TAG))
         return with_fitted_values(untagged, parameters)
+
+    def assess(
+        self,
+        artifacts: dict[str, Any] | None,
+        parameters: dict[str, float],
+        options: dict[str, Any],
+        simulate: bool,
+    ) -> Assessment:
+        """The ground truth's name and loss, the best law's derived values (``exp(log_E)``) and
+        its free run, from its captured graph (its code is not run)."""
+        from tasks.constitutive.assessment import assess
+
+        return assess(self.spec, artifacts, parameters, options, simulate)
 
     def builtin_proposer(self) -> BuiltinProposer:
         """Genetic programming over law code (no model needed)."""
