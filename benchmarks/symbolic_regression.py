@@ -79,7 +79,7 @@ class Budget:
     operon_max_length: int
     mlp_hidden: tuple[int, ...]
     mlp_iterations: int
-    search: tuple[str, ...]
+    search: tuple[str, ...]  # settings of the search run when no --run is given
 
 
 FULL = Budget(
@@ -139,7 +139,7 @@ class Row:
     mae: float = math.nan
     non_finite: int = 0  # test predictions that are NaN or infinite
     trajectory_loss: float = math.nan
-    trajectory: str = ""  # "ok", "unstable (step N)" or why the law failed
+    trajectory: str = ""  # "ok", "unstable (step N): why" or why the law failed
     fit_seconds: float = math.nan
     torch_error: float = 0.0  # max |torch law - library prediction| / std(target), test split
     expressions: list[str] = field(default_factory=list)
@@ -345,8 +345,8 @@ class Fit:
 
 
 def fit_operon(data: Samples, budget: Budget, seed: int) -> Fit:
-    """One Operon expression per component (NSGA-free single objective R2, Levenberg-Marquardt
-    on the constants, linear scaling)."""
+    """One Operon expression per component: single-objective GP on R2, 5 Levenberg-Marquardt
+    iterations on each tree's constants, the result linearly scaled to the target."""
     from pyoperon.sklearn import SymbolicRegressor
 
     started = time.perf_counter()
@@ -439,22 +439,9 @@ def fit_mlp(data: Samples, budget: Budget, seed: int) -> Fit:
 
 def search(out_dir: Path, budget: Budget, seed: int) -> Path:
     """Run ``sga-agent search --task elastic --model builtin`` into ``out_dir``; its folder."""
-    command = [
-        sys.executable,
-        "-m",
-        "sga_agent",
-        "search",
-        "--task",
-        "elastic",
-        "--model",
-        "builtin",
-        "--seed",
-        str(seed),
-        "--json",
-        "--out-dir",
-        str(out_dir),
-        *budget.search,
-    ]
+    command = [sys.executable, "-m", "sga_agent", "search", "--task", "elastic"]
+    command += ["--model", "builtin", "--seed", str(seed), "--json", "--out-dir", str(out_dir)]
+    command += ["--option", f"steps={budget.steps}", *budget.search]
     path = os.pathsep.join(filter(None, [str(REPOSITORY), os.environ.get("PYTHONPATH")]))
     env = {**os.environ, "PYTHONPATH": path, "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
     progress("search: " + " ".join(command[1:]))
@@ -507,9 +494,9 @@ def trajectory(law: nn.Module, observed: Trajectory, spec: ConstitutiveSpec) -> 
         result = optimize(
             rollout, law, observed, InnerSettings(epochs=0, reset_every=spec.reset_every)
         )
-    except NoFiniteEpoch as error:  # the message names the step: "... non-finite at step 57"
+    except NoFiniteEpoch as error:  # "... non-finite at step 57" or "... at the initial state"
         step = re.search(r"at step (\d+)", str(error))
-        return math.nan, "unstable" + (f" (step {step.group(1)})" if step else "")
+        return math.nan, f"unstable (step {step.group(1) if step else 0}): {error}"
     except LawError as error:
         return math.nan, f"rejected: {str(error).splitlines()[0][:120]}"
     except Exception as error:  # the law failing inside the simulation (e.g. an SVD of NaN)
@@ -566,6 +553,7 @@ def markdown(rows: list[Row]) -> str:
     for row in rows:
         r2 = f"{row.r2:.6f}" if math.isfinite(row.r2) else f"n/a ({row.non_finite} non-finite)"
         loss = number(row.trajectory_loss) if row.trajectory == "ok" else row.trajectory
+        loss = loss.split(":")[0]  # the reason is in the JSON
         fit = "" if math.isnan(row.fit_seconds) else f"{row.fit_seconds:.0f}"
         lines.append(
             f"| {row.method} | {'yes' if row.symbolic else 'no'} | {r2} | "
@@ -580,8 +568,8 @@ def progress(message: str) -> None:
 
 def labelled(text: str) -> tuple[str | None, Path]:
     """``LABEL=DIR`` or ``DIR``."""
-    label, _, folder = text.rpartition("=")
-    return (label or None), Path(folder)
+    label, separator, folder = text.partition("=")
+    return (label, Path(folder)) if separator else (None, Path(text))
 
 
 def main(argv: list[str] | None = None) -> int:
