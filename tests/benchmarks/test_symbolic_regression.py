@@ -17,6 +17,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 #: method of the script -> the library it needs
+pytestmark = pytest.mark.slow  # the quick benchmark runs a search and three fits: a minute
+
 LIBRARIES = {"operon": "pyoperon", "ffx": "ffx", "mlp": "sklearn"}
 NAMES = {"operon": "Operon", "ffx": "FFX", "mlp": "MLP"}
 HEADER = "| method | symbolic | R² ↑ | MSE ↓ | MAE ↓ | trajectory loss ↓ | fit (s) |"
