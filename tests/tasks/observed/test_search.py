@@ -59,7 +59,7 @@ def test_the_gp_finds_a_law_5x_better_than_the_seed(registered, tmp_path: Path) 
                           timeout=600)  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     summary = json.loads(done.stdout)
-    run = Path(summary["run_dir"]) if "run_dir" in summary else next((tmp_path / "runs").iterdir())
+    run = Path(summary["run"])
     seed = json.loads((run / "candidates" / "00-seed" / "evaluation.json").read_text())
     best = min(
         json.loads(path.read_text())["loss"] if json.loads(path.read_text())["status"] == "ok"
