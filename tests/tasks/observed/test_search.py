@@ -52,7 +52,7 @@ def test_the_gp_finds_a_law_5x_better_than_the_seed(registered, tmp_path: Path) 
         "search", "--task", "observed",
         "--option", f"observation={observation}", "--option", "searched=plastic",
         "--option", f"E={E}", "--option", f"nu={NU}", "--option", "segment=40",
-        "--model", "builtin", "--iterations", "3", "--workers", "2",
+        "--model", "builtin", "--iterations", "4", "--workers", "2",
         "--out-dir", str(tmp_path / "runs"), "--json",
     ]  # fmt: skip
     done = subprocess.run(command, cwd=tmp_path, env=registered, capture_output=True, text=True,
