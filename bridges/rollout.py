@@ -164,6 +164,7 @@ def trajectory_loss(
     segment: int = 100,
     backward: bool = True,
     batch: int = 1,
+    weights: torch.Tensor | np.ndarray | None = None,
 ) -> RolloutResult:
     """Mean squared position error against ``observed``, differentiated segment by segment.
 
@@ -185,6 +186,10 @@ def trajectory_loss(
         With teacher forcing, segments of equal length run this many at a time, as one batch
         of copies of the scene. The result is the same (to round-off) for every batch size;
         memory grows with it (the graph of ``batch`` segments is held at once).
+    weights : (steps + 1, N), optional
+        Which positions are observed: each particle's squared error at each step counts with
+        its weight (0: not observed, 1: observed), and the loss is the weighted mean. Default:
+        every position counts.
 
     Raises
     ------
@@ -200,13 +205,20 @@ def trajectory_loss(
         raise ValueError(
             f"teacher forcing needs {len(starts)} reset states, got {len(resets['x'])}"
         )
-    scale = 1.0 / (steps * observed.shape[1] * 3)
+    if weights is None:
+        weights = torch.ones(observed.shape[:2], dtype=rollout.dtype)
+        weights[0] = 0.0
+    weights = torch.as_tensor(weights, dtype=rollout.dtype)
+    if tuple(weights.shape) != tuple(observed.shape[:2]):
+        raise ValueError(f"weights must have shape {tuple(observed.shape[:2])}, got "
+                         f"{tuple(weights.shape)}")  # fmt: skip
+    scale = 1.0 / (float(weights[1:].sum()) * 3)
     first = _start_state(rollout, resets, 0)
     rollout.check_laws(first)
     positions = np.empty(tuple(observed.shape))
     positions[0] = first.x.numpy()
     if resets is None and backward:
-        return _checkpointed(rollout, observed, starts, segment, scale, positions)
+        return _checkpointed(rollout, observed, weights, starts, segment, scale, positions)
     total = 0.0
     if resets is None:  # forward only: one segment after the other
         groups = [[index] for index in range(len(starts))]
@@ -218,8 +230,8 @@ def trajectory_loss(
             state = State.stacked([_start_state(rollout, resets, index) for index in group])
         with torch.set_grad_enabled(backward):
             group_starts = [starts[index] for index in group]
-            loss, state = _segment(rollout, state, observed, group_starts, segment, scale,
-                                   positions)  # fmt: skip
+            loss, state = _segment(rollout, state, observed, weights, group_starts, segment,
+                                   scale, positions)  # fmt: skip
             if backward:
                 loss.backward()
         total += loss.item()
@@ -264,23 +276,23 @@ def _start_state(rollout: Rollout, resets, index: int) -> State:
     return State.from_arrays(resets, index, rollout.dtype)
 
 
-def _segment(rollout, state, observed, starts, segment, scale, positions):
+def _segment(rollout, state, observed, weights, starts, segment, scale, positions):
     """Run the segments from ``starts`` (a batch of copies, states stacked in ``state``):
     (their scaled squared error, the stacked end state)."""
     stop = min(starts[0] + segment, observed.shape[0] - 1)
     length, copies, N = stop - starts[0], len(starts), observed.shape[1]
     first = torch.as_tensor(starts)
     # targets[s]: the observed positions of every copy after its step s + 1, stacked
-    targets = observed[first[None, :] + torch.arange(1, length + 1)[:, None]].reshape(
-        length, copies * N, 3
-    )
+    rows = first[None, :] + torch.arange(1, length + 1)[:, None]
+    targets = observed[rows].reshape(length, copies * N, 3)
+    counted = weights[rows].reshape(length, copies * N, 1)
     errors = []
 
     def record(s: int, st: State) -> None:
         x = st.x.detach().numpy().reshape(copies, N, 3)
         for copy, start in enumerate(starts):
             positions[start + s] = x[copy]
-        errors.append(((st.x - targets[s - 1]) ** 2).sum())
+        errors.append((counted[s - 1] * (st.x - targets[s - 1]) ** 2).sum())
 
     try:
         state = rollout.run(state, length, record, batch=copies)
@@ -308,7 +320,7 @@ def _first_non_finite(positions: np.ndarray, starts: list[int], length: int) -> 
     return min(bad, default=starts[0] + length)
 
 
-def _checkpointed(rollout, observed, starts, segment, scale, positions) -> RolloutResult:
+def _checkpointed(rollout, observed, weights, starts, segment, scale, positions) -> RolloutResult:
     """No teacher forcing: keep segment starts, then backward last segment first."""
     checkpoints = []
     state = State.initial(rollout.scene, rollout.dtype)
@@ -316,12 +328,14 @@ def _checkpointed(rollout, observed, starts, segment, scale, positions) -> Rollo
     with torch.no_grad():
         for start in starts:
             checkpoints.append(state)
-            loss, state = _segment(rollout, state, observed, [start], segment, scale, positions)
+            loss, state = _segment(rollout, state, observed, weights, [start], segment, scale,
+                                   positions)  # fmt: skip
             total += loss.item()
     carried: tuple[torch.Tensor, ...] | None = None
     for start, checkpoint in zip(reversed(starts), reversed(checkpoints), strict=True):
         leaf = checkpoint.detached(requires_grad=True)
-        loss, end = _segment(rollout, leaf, observed, [start], segment, scale, positions)
+        loss, end = _segment(rollout, leaf, observed, weights, [start], segment, scale,
+                             positions)  # fmt: skip
         if carried is not None:
             loss = loss + sum((t * g).sum() for t, g in zip(end.tensors(), carried, strict=True))
         loss.backward()

@@ -8,6 +8,9 @@ random subset of the particles), adds Gaussian noise, and writes the file that
     python scripts/make_observation.py obs.npz --material sand --noise 0.01 --subset 0.5
     python scripts/make_observation.py obs.npz --material vonmises --scene paper --steps 300
 
+The hidden material goes beside the file as ``OUT.truth.json`` (family and parameters), where
+the ``observed`` task's report reads it; nothing shows it to a search.
+
 Scenes: ``thrown`` is a 5^3-particle cube of side 0.2 thrown, spinning, into the floor of
 a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``paper`` is the SGA paper's scene
 (:func:`taichi_mpm.paper_scene`: 10^3 particles, 20^3 grid, dt = 5e-4 s, 1000 steps).
@@ -15,6 +18,7 @@ a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``paper`` is the SGA paper's sc
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -194,8 +198,13 @@ def main(
     observation = observation_from_times(scene, positions, frame_steps * scene.dt, indices)
     out.parent.mkdir(parents=True, exist_ok=True)
     save_observation(out, observation)
-
     hidden = material.parameters()
+    truth = out.with_suffix(".truth.json")
+    truth.write_text(json.dumps({
+        "family": family, "parameters": hidden, "noise": noise, "subset": subset,
+        "frames": len(frame_steps), "seed": seed, "scene": scene_name, "steps": steps,
+    }, indent=1) + "\n")  # fmt: skip
+
     click.echo(f"material family: {family} ({FAMILIES[family]})")
     click.echo("hidden parameters: " + ", ".join(f"{k}={v:g}" for k, v in hidden.items()))
     click.echo(
@@ -207,6 +216,7 @@ def main(
         f"{frame_steps[-1] * scene.dt:g} s, {len(indices)} of {count} particles, "
         f"noise {noise:g} x body size {body_size:g} m (seed {seed})"
     )
+    click.echo(f"wrote the hidden truth beside it, for reports only: {truth}")
 
 
 if __name__ == "__main__":

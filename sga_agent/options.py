@@ -26,7 +26,9 @@ class OptionError(ValueError):
 def parse_options(options_type: type, raw: Mapping[str, str], task: str) -> dict[str, Any]:
     """The options in ``raw`` (text values) converted to their fields' types.
 
-    Only the given keys are returned (the task's defaults stay the task's).
+    Only the given keys are returned (the task's defaults stay the task's), as the dataclass
+    holds them after its ``__post_init__`` (which may normalise a value, e.g. make a path
+    absolute).
 
     Raises
     ------
@@ -44,10 +46,10 @@ def parse_options(options_type: type, raw: Mapping[str, str], task: str) -> dict
             raise OptionError(f"task {task!r} has no option {key!r}{hint} (its options: {known})")
         values[key] = _convert(key, text, fields[key])
     try:
-        options_type(**values)
+        built = options_type(**values)
     except (TypeError, ValueError) as error:
         raise OptionError(str(error)) from None
-    return values
+    return {key: getattr(built, key) for key in values}
 
 
 def describe_options(options_type: type) -> str:

@@ -21,7 +21,7 @@ from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool, threads_per_worker
 from sga_agent.search import Search, SearchResult
-from sga_agent.task import Task
+from sga_agent.task import Task, configured
 
 REPLAY_PREFIX = "replay:"
 BUILTIN = "builtin"
@@ -119,7 +119,7 @@ def run(
 ) -> SearchResult:
     """Run (or continue) the search ``config`` describes, recording into ``store``; the
     proposer is ``make_proposer``'s unless given."""
-    task = registry.load_task(config.task)
+    task = configured(registry.load_task(config.task), config.task_options)
     if proposer is None:
         proposer = make_proposer(config, task)
     with make_pool(config) as pool:

@@ -213,6 +213,12 @@ def solution_with_parameters(task: object, solution: str, parameters: dict[str, 
     return write(solution, parameters) if write is not None and parameters else solution
 
 
+def configured(task: Any, options: dict[str, Any]) -> Any:
+    """``task`` set up for ``options`` by its optional ``with_options``, else ``task``."""
+    configure = getattr(task, "with_options", None)
+    return configure(options) if configure is not None else task
+
+
 @runtime_checkable
 class Task(Protocol):
     """A scientific problem the search can work on.
@@ -240,6 +246,11 @@ class Task(Protocol):
     ``solution_with_parameters(solution: str, parameters: dict) -> str``, also optional,
     writes fitted parameter values into a solution for people to read (the end of a search,
     reports); it must not run the solution's code.
+
+    ``with_options(options: dict) -> Task``, optional, returns the task set up for a run's
+    options (typed, as ``EvaluationSettings.options`` holds them) where its seed, prompt or
+    built-in proposer depend on them (a task whose data is a file named by an option); the
+    search calls it through :func:`configured`.
 
     ``assess(artifacts: dict | None, parameters: dict, options: dict, simulate: bool) ->
     Assessment``, optional, tells summaries and reports what only the task knows about the

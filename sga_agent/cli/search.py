@@ -19,6 +19,7 @@ from sga_agent.proposers.base import ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunStore, RunStoreError
+from sga_agent.task import configured
 
 
 def default(name: str) -> Any:
@@ -152,7 +153,8 @@ def check_executor(config: SearchConfig) -> None:
 def make_proposer(config: SearchConfig):
     """The run's proposer; a bad choice is a usage error, a missing API key an error."""
     try:
-        proposer = runner.make_proposer(config, registry.load_task(config.task))
+        task = configured(registry.load_task(config.task), config.task_options)
+        proposer = runner.make_proposer(config, task)
     except ValueError as error:  # unknown built-in, malformed model string
         raise click.UsageError(str(error)) from error
     if isinstance(proposer, LiteLLMProposer):

@@ -22,7 +22,7 @@ from taichi_mpm import runtime
 from tasks.constitutive import feedback
 from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
-from tasks.constitutive.inner import InnerSettings, NoFiniteEpoch, optimize
+from tasks.constitutive.inner import InnerResult, InnerSettings, NoFiniteEpoch, optimize
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.options import ConstitutiveOptions
@@ -81,6 +81,30 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
                         batch=batch)  # fmt: skip
 
 
+def fit(
+    rollout: Rollout, law: torch.nn.Module, observed: Trajectory, inner: InnerSettings,
+    started: float,
+) -> InnerResult | Evaluation:
+    """The inner optimization's result, or the invalid :class:`Evaluation` that says why the
+    law could not be fitted (``started``: when the evaluation began, for its duration)."""
+    try:
+        return optimize(rollout, law, observed, inner)
+    except LawError as error:
+        return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
+    except NoFiniteEpoch as error:
+        return Evaluation.invalid(
+            f"the simulation is unstable with this law ({error})",
+            status="unstable",
+            seconds=time.perf_counter() - started,
+        )
+    except Exception as error:  # a law failing inside forward, e.g. a shape mismatch
+        return Evaluation.invalid(
+            f"the law raised {describe_error(error)} during the simulation",
+            status="out_of_memory" if is_out_of_memory(error) else "error",
+            seconds=time.perf_counter() - started,
+        )
+
+
 def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) -> Evaluation:
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
@@ -110,22 +134,9 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         optimizer=options.optimizer or spec.optimizer,
         graph_memory_mb=options.graph_memory_mb,
     )
-    try:
-        result = optimize(rollout, law, observed, inner)
-    except LawError as error:
-        return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
-    except NoFiniteEpoch as error:
-        return Evaluation.invalid(
-            f"the simulation is unstable with this law ({error})",
-            status="unstable",
-            seconds=time.perf_counter() - started,
-        )
-    except Exception as error:  # a law failing inside forward, e.g. a shape mismatch
-        return Evaluation.invalid(
-            f"the law raised {describe_error(error)} during the simulation",
-            status="out_of_memory" if is_out_of_memory(error) else "error",
-            seconds=time.perf_counter() - started,
-        )
+    result = fit(rollout, law, observed, inner, started)
+    if isinstance(result, Evaluation):
+        return result
     corners = feedback.corner_particles(observed.positions[0])
     text = "\n\n".join(
         [

@@ -37,20 +37,24 @@ def _curve(values: list[float]) -> str:
     return ", ".join(f"{i}: {value:.4g}" for i, value in _sampled(values))
 
 
-def optimization_text(result: InnerResult, settings: InnerSettings) -> str:
-    """Loss and parameter curves with their best values."""
+#: What the loss of the constitutive tasks is, as the feedback names it.
+LOSS = "mean squared position error over all steps, m^2"
+
+
+def optimization_text(result: InnerResult, settings: InnerSettings, loss: str = LOSS) -> str:
+    """Loss and parameter curves with their best values; ``loss`` says what the loss is."""
     epochs = len(result.losses)
     lines = []
     if not result.parameters:
         lines.append(
-            f"The law has no trainable parameters; it was simulated once. Loss (mean squared "
-            f"position error over all steps, m^2): {result.best_loss:.6g}."
+            f"The law has no trainable parameters; it was simulated once. Loss ({loss}): "
+            f"{result.best_loss:.6g}."
         )
     else:
         lines += [
             f"Inner optimization: {_optimizer(settings)} over {epochs} evaluations of the "
             "whole trajectory.",
-            f"Loss (mean squared position error over all steps, m^2), by epoch: "
+            f"Loss ({loss}), by epoch: "
             f"{_curve(result.losses)}",
             f"Best loss {result.best_loss:.6g} at epoch {result.best_epoch}.",
             "Parameters by epoch (the value at the best epoch is kept):",

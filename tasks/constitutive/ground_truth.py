@@ -26,11 +26,17 @@ FORMAT_VERSION = 1
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Observed positions (steps + 1, N, 3) and reset states, stacked, at ``reset_steps``."""
+    """Observed positions (steps + 1, N, 3) and reset states, stacked, at ``reset_steps``.
+
+    An observation without full states (``states`` None: no teacher forcing) may see only
+    some positions: ``weights`` (steps + 1, N) is 1 where a position was observed, else 0
+    (see :func:`bridges.rollout.trajectory_loss`); None means all of them.
+    """
 
     positions: np.ndarray
     reset_steps: np.ndarray
-    states: dict[str, np.ndarray]
+    states: dict[str, np.ndarray] | None
+    weights: np.ndarray | None = None
 
 
 def cache_dir() -> Path:

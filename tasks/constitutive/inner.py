@@ -42,6 +42,8 @@ class InnerSettings:
 
     The teacher-forced segments of an epoch run as batches of scene copies, as many at a time
     as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand; at least one).
+    Without reset states (``Trajectory.states`` None) ``reset_every`` is the length of the
+    checkpointed segments the gradient is carried across.
     """
 
     epochs: int = 30
@@ -174,12 +176,17 @@ class _Fit:
         started = time.perf_counter()
         epoch = self.epochs_done
         try:
-            if backward and not self.batch:
-                self.batch = self._segments_per_batch()
+            observed = self.observed
+            if observed.states is None:  # no teacher forcing: checkpointed segments
+                batch = 1
+            elif backward:
+                self.batch = self.batch or self._segments_per_batch()
+                batch = self.batch
+            else:
+                batch = len(observed.states["x"])
             run = trajectory_loss(
-                self.rollout, self.observed.positions, self.observed.states,
-                self.settings.reset_every, backward=backward,
-                batch=self.batch if backward else len(self.observed.states["x"]),
+                self.rollout, observed.positions, observed.states, self.settings.reset_every,
+                backward=backward, batch=batch, weights=observed.weights,
             )  # fmt: skip
         except UnstableSimulation as error:
             self.failure = f"epoch {epoch}: {error}"

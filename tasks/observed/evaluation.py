@@ -1,0 +1,186 @@
+"""Scoring a captured law on an observation, and what a report learns about the best one.
+
+Trusted, as :mod:`tasks.constitutive.evaluation`: the law is rebuilt from its checked graph and
+fitted with the constitutive tasks' inner optimization, here without teacher forcing (the
+observation has positions only): one rollout from the initial state per epoch, its loss the
+mean squared error over the observed frames and particles, the gradient carried back across
+checkpointed segments of ``segment`` steps. The hidden truth beside the observation file is
+read by :func:`assess` alone, for reports.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from bridges import laws as torch_laws
+from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
+from bridges.step import torch_dtype
+from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
+from taichi_mpm.sysid.families import FAMILIES, material_family
+from tasks.constitutive import feedback
+from tasks.constitutive.artifacts import encode_positions
+from tasks.constitutive.assessment import derived_values, fitted_law
+from tasks.constitutive.evaluation import check_precision, ensure_runtime, fit
+from tasks.constitutive.ground_truth import Trajectory
+from tasks.constitutive.inner import InnerSettings
+from tasks.constitutive.law_graph import LawGraphError, build_law
+from tasks.observed.data import ObservedData, read_truth
+from tasks.observed.options import ObservedOptions
+
+EPOCHS, LEARNING_RATE = 30, 3e-2  # the constitutive tasks' inner defaults
+
+
+def known_elastic(options: ObservedOptions, dtype: torch.dtype) -> torch.nn.Module:
+    """The given elastic law of a plastic search, frozen."""
+    material = material_family(options.elastic, E=options.E, nu=options.nu)
+    return torch_laws.from_material(material, dtype)[1].requires_grad_(False)
+
+
+def rollout_for(
+    law: torch.nn.Module, data: ObservedData, options: ObservedOptions, dtype: torch.dtype
+) -> Rollout:
+    """The observed scene with ``law`` in the searched place."""
+    if options.searched == "elastic":
+        return Rollout(data.scene, torch_laws.NoPlasticity(), law)
+    return Rollout(data.scene, law, known_elastic(options, dtype))
+
+
+def trajectory(data: ObservedData) -> Trajectory:
+    """The observation as the inner optimization takes it: no reset states, weighted."""
+    positions, weights = data.dense()
+    return Trajectory(positions, np.zeros(0, dtype=np.int64), None, weights)
+
+
+def setup(options: dict[str, Any]) -> tuple[ObservedOptions, ObservedData, torch.dtype]:
+    """Typed options, the data and the dtype of a Taichi started in their precision."""
+    typed = ObservedOptions(**options)
+    check_precision(typed.precision)
+    ensure_runtime(typed.precision or "float32")
+    return typed, ObservedData.load(typed.observation, typed.frames), torch_dtype()
+
+
+def warm_up(options: dict[str, Any]) -> None:
+    """Compile the kernels of a checkpointed forward and backward pass (two 1-step segments
+    with a von Mises law), so the first evaluation does not pay for them."""
+    typed, data, dtype = setup(options)
+    elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
+    plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
+    positions, weights = data.dense()
+    trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
+                    weights=np.ones_like(weights[:3]))  # fmt: skip
+
+
+def loss_text(data: ObservedData) -> str:
+    return (f"mean squared position error over the {len(data.frame_steps)} observed frames and "
+            f"{len(data.particles)} observed particles, m^2")  # fmt: skip
+
+
+def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
+    """Fit the captured law ``data`` (``{"law": graph}``) to the observation named in
+    ``settings.options``; the artifact ``trajectory`` holds the best epoch's positions."""
+    started = time.perf_counter()
+    options, observed, dtype = setup(settings.options)
+    try:
+        law = build_law(data.get("law") if isinstance(data, dict) else None, dtype)
+    except LawGraphError as error:
+        return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
+    rollout = rollout_for(law, observed, options, dtype)
+    inner = InnerSettings(
+        epochs=EPOCHS if settings.epochs is None else settings.epochs,
+        learning_rate=settings.learning_rate or LEARNING_RATE,
+        reset_every=options.segment,
+        optimizer=options.optimizer or "adam",
+    )
+    result = fit(rollout, law, trajectory(observed), inner, started)
+    if isinstance(result, Evaluation):
+        return result
+    text = "\n\n".join([feedback.optimization_text(result, inner, loss_text(observed)),
+                        trajectory_text(result.positions, observed)])  # fmt: skip
+    return Evaluation(
+        valid=math.isfinite(result.best_loss),
+        loss=result.best_loss,
+        feedback=text,
+        parameters=result.best_parameters,
+        curves={"loss": result.losses, **result.parameters},
+        extras={"best_epoch": result.best_epoch, "stopped": result.stopped,
+                "epoch_seconds": result.seconds},  # fmt: skip
+        seconds=time.perf_counter() - started,
+        artifacts={"trajectory": encode_positions(result.positions)},
+    )
+
+
+def trajectory_text(predicted: np.ndarray, data: ObservedData) -> str:
+    """Four observed particles at the corners of the body, simulated next to observed, at up
+    to ten of the observed frames."""
+    start = data.scene.positions[data.particles]
+    picks = np.unique(np.linspace(0, len(data.frame_steps) - 1, feedback.TRAJECTORY_FRAMES)
+                      .round().astype(int))  # fmt: skip
+    lines = ["Trajectories of observed particles near the body's corners (x, y, z in m; y "
+             "points up), simulated vs observed:"]  # fmt: skip
+    for number, column in enumerate(dict.fromkeys(feedback.corner_particles(start))):
+        particle = data.particles[column]
+        lines.append(f"Particle {number} (starts at {_xyz(start[column])}):")
+        for pick in picks:
+            step = data.frame_steps[pick]
+            lines.append(f"  t = {step * data.scene.dt:.3f} s: simulated "
+                         f"{_xyz(predicted[step, particle])}, observed "
+                         f"{_xyz(data.positions[pick, column])}")  # fmt: skip
+    return "\n".join(lines)
+
+
+def _xyz(point: np.ndarray) -> str:
+    return "(" + ", ".join(f"{c:.3f}" for c in point) + ")"
+
+
+def assess(
+    artifacts: dict[str, Any] | None, parameters: dict[str, float], options: dict[str, Any],
+    simulate: bool,
+) -> Assessment:
+    """The hidden truth (from the file beside the observation, if any) with its loss scored
+    like a candidate's without fitting, the best law's readable values and its free run."""
+    typed, data, dtype = setup(options)
+    found = Assessment()
+    truth = read_truth(typed.observation)
+    if truth is not None:
+        values = ", ".join(f"{k} = {v:g}" for k, v in truth["parameters"].items())
+        found.truth = f"{FAMILIES[truth['family']]}; {values} (hidden from the search)"
+        material = material_family(truth["family"], **truth["parameters"])
+        plastic, elastic = torch_laws.from_material(material, dtype)
+        rollout = Rollout(data.scene, plastic.requires_grad_(False), elastic.requires_grad_(False))
+        observed = trajectory(data)
+        found.truth_loss = trajectory_loss(rollout, observed.positions, None, typed.segment,
+                                           backward=False, weights=observed.weights).loss
+    graph = ((artifacts or {}).get("captured") or {}).get("law")
+    if graph is None:
+        return found
+    found.derived = derived_values(graph, parameters)
+    if simulate:
+        found.free_run = free_run(fitted_law(graph, parameters, dtype), data, typed, dtype)
+    return found
+
+
+def free_run(
+    law: torch.nn.Module, data: ObservedData, options: ObservedOptions, dtype: torch.dtype
+) -> FreeRun:
+    """``law`` simulated from the initial state against the observed particles at the observed
+    frames: RMS distance per frame in body sizes, at the last frame and averaged."""
+    size, steps = data.body_size, data.scene.steps
+    rollout = rollout_for(law, data, options, dtype)
+    try:
+        simulated = rollout.simulate()
+    except (UnstableSimulation, torch.linalg.LinAlgError) as error:
+        return FreeRun(math.inf, math.inf, size, steps, unstable=str(error).splitlines()[0])
+    simulated = simulated[data.frame_steps][:, data.particles]
+    if not np.isfinite(simulated).all():
+        return FreeRun(math.inf, math.inf, size, steps, unstable="non-finite positions")
+    errors = np.sqrt(((simulated - data.positions) ** 2).sum(axis=-1).mean(axis=-1)) / size
+    return FreeRun(
+        final_error=float(errors[-1]), mean_error=float(errors.mean()), body_size=size,
+        steps=steps, frames=data.frame_steps.tolist(), positions=simulated,
+        observed=data.positions,
+    )  # fmt: skip

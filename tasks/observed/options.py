@@ -1,0 +1,69 @@
+"""The options of the ``observed`` task (``--option KEY=VALUE``): the observation file, what is
+searched and the known elastic law; plain data, checked when the options are parsed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+#: taichi_mpm's elastic laws by their system-identification family names.
+ElasticFamily = Literal["stvk", "neohookean", "elastic", "corotated", "linear"]
+
+
+@dataclass(frozen=True)
+class ObservedOptions:
+    """``observation``: the ``.npz`` file (format of :mod:`taichi_mpm.sysid.observation`), made
+    absolute; it is read and checked here, so a bad file is a usage error before anything runs.
+    ``searched``: ``elastic`` (F to Kirchhoff stress) or ``plastic`` (the return mapping, the
+    elastic law then known: family ``elastic`` with Young's modulus ``E`` (Pa) and Poisson's
+    ratio ``nu``). ``frames``: fit only the first this many observed frames after t = 0
+    (default all). ``segment``: steps per checkpointed segment of the backward pass.
+    ``optimizer`` and ``precision`` as in the constitutive tasks."""
+
+    observation: str | None = None
+    searched: Literal["elastic", "plastic"] | None = None
+    elastic: ElasticFamily = "stvk"
+    E: float | None = None
+    nu: float | None = None
+    frames: int | None = None
+    segment: int = 50
+    optimizer: Literal["adam", "lbfgs"] | None = None
+    precision: Literal["float32", "float64"] | None = None
+
+    def __post_init__(self) -> None:
+        from tasks.observed.data import read_observation
+
+        if self.observation is None:
+            raise ValueError("option 'observation' is required: the .npz file of the observed "
+                             "motion (see taichi_mpm.sysid.save_observation)")  # fmt: skip
+        if self.searched is None:
+            raise ValueError("option 'searched' is required: elastic or plastic")
+        path = Path(self.observation).expanduser().resolve()
+        object.__setattr__(self, "observation", str(path))
+        try:
+            observation = read_observation(path)
+        except ValueError as error:  # the sysid loader's ObservationError
+            raise ValueError(f"option 'observation': {error}") from None
+        available = int((observation.frame_steps > 0).sum())
+        if self.frames is not None and not 2 <= self.frames <= available:
+            raise ValueError(f"option 'frames' must lie in [2, {available}] (the observed "
+                             f"frames after t = 0), got {self.frames}")  # fmt: skip
+        if self.segment < 1:
+            raise ValueError(f"option 'segment' must be at least 1, got {self.segment}")
+        self._check_elastic()
+
+    def _check_elastic(self) -> None:
+        given = [name for name in ("E", "nu") if getattr(self, name) is not None]
+        if self.searched == "elastic":
+            if given:
+                raise ValueError(f"option(s) {', '.join(given)} describe the known elastic law: "
+                                 "give them only with searched=plastic")  # fmt: skip
+            return
+        if len(given) < 2:
+            raise ValueError("searched=plastic needs the known elastic law: options E (Young's "
+                             "modulus, Pa) and nu (Poisson's ratio), and elastic=FAMILY "
+                             "(default stvk)")  # fmt: skip
+        from taichi_mpm.sysid.families import material_family
+
+        material_family(self.elastic, E=self.E, nu=self.nu)  # MaterialError for bad values

@@ -1,0 +1,95 @@
+"""``observed``: discover the constitutive law of an object from your own observation of it.
+
+The observation is a ``taichi_mpm.sysid`` file (scene, initial state, positions of some or all
+particles at some frames), named by ``--option observation=PATH.npz``; ``--option
+searched=plastic`` (with the known elastic law: ``elastic=FAMILY``, ``E``, ``nu``) or
+``searched=elastic`` says which part of the law is searched. Laws are proposed, captured and
+checked exactly as in the constitutive tasks; the fit runs without teacher forcing.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
+from tasks.constitutive import prompt_text
+from tasks.constitutive.task import ConstitutiveTask
+from tasks.observed.options import ObservedOptions
+
+
+class ObservedTask(ConstitutiveTask):
+    """Search the law behind an observation file; set up for it by :meth:`with_options`.
+
+    Shares the constitutive tasks' solution checks, capture and fitted-code display; the seed,
+    prompt and proposer follow ``searched``, the evaluation the observation.
+    """
+
+    options_type = ObservedOptions
+
+    def __init__(self, options: ObservedOptions | None = None) -> None:
+        self.options = options
+        self.name = "observed"
+        self.description = ("a constitutive law (elastic or plastic part) discovered from your "
+                            "own observation file (taichi_mpm.sysid format)")  # fmt: skip
+
+    def with_options(self, options: dict[str, Any]) -> ObservedTask:
+        return ObservedTask(ObservedOptions(**options))
+
+    def configured_options(self) -> ObservedOptions:
+        """The options this task was set up with; a ``ValueError`` if none were given."""
+        if self.options is None:
+            raise ValueError("task 'observed' needs its options: --option observation=PATH.npz "
+                             "--option searched=plastic|elastic")  # fmt: skip
+        return self.options
+
+    @property
+    def searched(self) -> str:
+        return self.configured_options().searched
+
+    def seed_solution(self) -> str:
+        """The linear elastic law, or no plasticity (the constitutive tasks' seeds)."""
+        if self.searched == "elastic":
+            return prompt_text.ELASTIC_SEED
+        return prompt_text.PLASTIC_SEED
+
+    def prompt_parts(self) -> PromptParts:
+        from tasks.observed.data import ObservedData
+        from tasks.observed.prompt import prompt_parts
+
+        options = self.configured_options()
+        return prompt_parts(ObservedData.load(options.observation, options.frames), options)
+
+    def warm_up_solutions(self) -> list[str]:
+        """Both seeds and a law using every common operation (the capture knows no options)."""
+        from tasks.constitutive.law_capture import WARM_UP_LAW
+
+        return [prompt_text.ELASTIC_SEED, prompt_text.PLASTIC_SEED, WARM_UP_LAW]
+
+    def warm_up_fit(self, options: dict[str, Any]) -> None:
+        from tasks.observed.evaluation import warm_up
+
+        warm_up(options)
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        from tasks.observed.evaluation import evaluate
+
+        return evaluate(data, settings)
+
+    def assess(
+        self,
+        artifacts: dict[str, Any] | None,
+        parameters: dict[str, float],
+        options: dict[str, Any],
+        simulate: bool,
+    ) -> Assessment:
+        """The hidden truth beside the observation (if written there) and its loss, the best
+        law's readable values and its free run against the observed particles."""
+        from tasks.observed.evaluation import assess
+
+        return assess(artifacts, parameters, options, simulate)
+
+    def builtin_proposer(self) -> BuiltinProposer:
+        """Genetic programming over law code, seeded by the searched part's seed law."""
+        from tasks.constitutive.gp import GeneticProgrammingProposer
+
+        return GeneticProgrammingProposer(self.searched)

@@ -1,0 +1,44 @@
+"""Shared pieces of the ``observed`` task's tests: the task registered through a dist-info
+entry point (as an installed distribution registers it), and synthetic observations."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture
+def registered(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+    """``observed`` in the ``sga_agent.tasks`` group here and in processes started with the
+    returned environment (the installed metadata may predate the entry point)."""
+    site = tmp_path / "site"
+    info = site / "observed_task-1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: observed-task\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(
+        "[sga_agent.tasks]\nobserved = tasks.observed:ObservedTask\n"
+    )
+    monkeypatch.syspath_prepend(str(site))
+    path = os.pathsep.join(filter(None, [str(site), str(REPO), os.environ.get("PYTHONPATH")]))
+    return {**os.environ, "PYTHONPATH": path}
+
+
+def observation_arrays(frames: int = 4, particles: int = 8, count: int = 27) -> dict:
+    """The arrays of a well-formed observation file of a small scene (positions made up)."""
+    rng = np.random.default_rng(0)
+    initial = 0.4 + 0.1 * rng.random((count, 3))
+    return {
+        "positions": np.repeat(initial[None, :particles], frames, axis=0),
+        "times": 1e-3 * np.arange(1, frames + 1),
+        "particle_indices": np.arange(particles),
+        "initial_positions": initial,
+        "initial_velocities": np.zeros((count, 3)),
+        "particle_volume": 1e-4, "density": 1e3, "grid_resolution": 16, "domain_size": 1.0,
+        "dt": 1e-3, "gravity": np.array([0.0, -9.8, 0.0]), "walls": "slip",
+        "wall_thickness": 3, "wall_friction": 0.0,
+    }  # fmt: skip
