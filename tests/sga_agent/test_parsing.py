@@ -7,6 +7,7 @@ import pytest
 from sga_agent.parsing import CodeRejected, check_candidate, check_code, parse_response
 from sga_agent.registry import load_task, task_names
 from sga_agent.task import PromptParts
+from tests.tasks.observed.conftest import ready_task
 
 RESPONSE = """\
 Here is my answer.
@@ -128,8 +129,8 @@ def test_truncated_code_block_runs_to_the_end():
 
 
 @pytest.mark.parametrize("name", task_names())
-def test_seed_solutions_of_the_registered_tasks_pass(name):
-    task = load_task(name)
+def test_seed_solutions_of_the_registered_tasks_pass(name, tmp_path):
+    task = ready_task(name, tmp_path)
     check_candidate(task.seed_solution(), task)
 
 

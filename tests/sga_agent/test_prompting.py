@@ -8,6 +8,7 @@ import pytest
 from sga_agent.prompting import Shown, build_messages, worst_first
 from sga_agent.registry import load_task, task_names
 from sga_agent.task import PromptParts
+from tests.tasks.observed.conftest import ready_task
 
 PARTS = PromptParts(
     role="ROLE-SENTENCE",
@@ -83,8 +84,8 @@ def test_without_history_no_iteration_is_shown():
 
 
 @pytest.mark.parametrize("name", task_names())
-def test_real_task_prompts_are_complete(name):
-    task = load_task(name)
+def test_real_task_prompts_are_complete(name, tmp_path):
+    task = ready_task(name, tmp_path)
     parts = task.prompt_parts()
     history = [Shown(task.seed_solution(), "loss 1.0", 1.0), Shown("broken", "invalid", math.inf)]
     messages = build_messages(task.kind, parts, history)

@@ -42,3 +42,17 @@ def observation_arrays(frames: int = 4, particles: int = 8, count: int = 27) -> 
         "dt": 1e-3, "gravity": np.array([0.0, -9.8, 0.0]), "walls": "slip",
         "wall_thickness": 3, "wall_friction": 0.0,
     }  # fmt: skip
+
+
+def ready_task(name: str, folder: Path):
+    """The registered task ``name``, set up on a small observation written into ``folder``
+    where its seed and prompt need options (``observed``, plastic searched)."""
+    from sga_agent.registry import load_task
+
+    task = load_task(name)
+    if name != "observed":
+        return task
+    path = folder / "observed.npz"
+    np.savez(path, **observation_arrays())
+    options = {"observation": str(path), "searched": "plastic", "E": 5e4, "nu": 0.3}
+    return task.with_options(options)
