@@ -166,6 +166,9 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
     from sga_agent.config import SearchConfig
     from sga_agent.run_store import RunStore
     from sga_agent.search import Search
+    from tasks.constitutive.assessment import truth_loss
+    from tasks.constitutive.options import ConstitutiveOptions
+    from tasks.constitutive.specs import SPECS
     from tests.sga_agent.test_search import Scripted
 
     hostile = [c for c in CATALOG if c.task == "granular" and c.static == "passes"][::3]
@@ -178,6 +181,9 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
         task_options={"steps": 20}, timeout_s=300.0, memory_mb=2048,
     )  # fmt: skip
     store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    # the summary's findings score the true law in this process (trusted code) and cache it:
+    # cached here first, so that any change below would be the candidates' doing
+    truth_loss(SPECS["granular"], ConstitutiveOptions(**cfg.task_options))
     before = cache_digests()
     limits = SandboxLimits(timeout_s=300.0, capture_timeout_s=10, memory_mb=2048)
     with SandboxPool(2, limits) as pool:
