@@ -144,10 +144,16 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
             feedback.trajectory_text(result.positions, observed.positions, scene.dt, corners),
         ]
     )
+    return fitted_evaluation(result, text, started)
+
+
+def fitted_evaluation(result: InnerResult, feedback_text: str, started: float) -> Evaluation:
+    """The Evaluation of a finished fit: its best epoch's loss and parameters, the curves, the
+    best epoch's positions as the ``trajectory`` artifact; ``started`` is when it began."""
     return Evaluation(
         valid=math.isfinite(result.best_loss),
         loss=result.best_loss,
-        feedback=text,
+        feedback=feedback_text,
         parameters=result.best_parameters,
         curves={"loss": result.losses, **result.parameters},
         extras={

@@ -23,9 +23,13 @@ from bridges.step import torch_dtype
 from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
 from taichi_mpm.sysid.families import FAMILIES, material_family
 from tasks.constitutive import feedback
-from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.assessment import derived_values, fitted_law
-from tasks.constitutive.evaluation import check_precision, ensure_runtime, fit
+from tasks.constitutive.evaluation import (
+    check_precision,
+    ensure_runtime,
+    fit,
+    fitted_evaluation,
+)
 from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law
@@ -101,17 +105,7 @@ def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
         return result
     text = "\n\n".join([feedback.optimization_text(result, inner, loss_text(observed)),
                         trajectory_text(result.positions, observed)])  # fmt: skip
-    return Evaluation(
-        valid=math.isfinite(result.best_loss),
-        loss=result.best_loss,
-        feedback=text,
-        parameters=result.best_parameters,
-        curves={"loss": result.losses, **result.parameters},
-        extras={"best_epoch": result.best_epoch, "stopped": result.stopped,
-                "epoch_seconds": result.seconds},  # fmt: skip
-        seconds=time.perf_counter() - started,
-        artifacts={"trajectory": encode_positions(result.positions)},
-    )
+    return fitted_evaluation(result, text, started)
 
 
 def trajectory_text(predicted: np.ndarray, data: ObservedData) -> str:
