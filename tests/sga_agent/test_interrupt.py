@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.plugins import register_task
+
 TASK_MODULE = '''
 """A task whose evaluations of "held" solutions wait while the file ``hold`` exists."""
 
@@ -74,15 +75,11 @@ def held_task(tmp_path):
     site = tmp_path / "site"
     site.mkdir()
     (site / "held_task.py").write_text(TASK_MODULE)
-    info = site / "held_task-0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: held-task\nVersion: 0\n")
-    (info / "entry_points.txt").write_text("[sga_agent.tasks]\nheld = held_task:HeldTask\n")
     hold = site / "hold"
     hold.touch()
     temporary = tmp_path / "tmp"  # the sandbox's folders: a helper left running shows here
     temporary.mkdir()
-    env = {**os.environ, "PYTHONPATH": f"{site}{os.pathsep}{REPO}", "TMPDIR": str(temporary)}
+    env = {**register_task(site, "held", "held_task:HeldTask"), "TMPDIR": str(temporary)}
     return hold, temporary, env
 
 

@@ -3,13 +3,12 @@ entry point (as an installed distribution registers it), and synthetic observati
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[3]
+from tests.plugins import register_task
 
 
 @pytest.fixture
@@ -17,15 +16,9 @@ def registered(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str
     """``observed`` in the ``sga_agent.tasks`` group here and in processes started with the
     returned environment (the installed metadata may predate the entry point)."""
     site = tmp_path / "site"
-    info = site / "observed_task-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: observed-task\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(
-        "[sga_agent.tasks]\nobserved = tasks.observed:ObservedTask\n"
-    )
+    env = register_task(site, "observed", "tasks.observed:ObservedTask")
     monkeypatch.syspath_prepend(str(site))
-    path = os.pathsep.join(filter(None, [str(site), str(REPO), os.environ.get("PYTHONPATH")]))
-    return {**os.environ, "PYTHONPATH": path}
+    return env
 
 
 def observation_arrays(frames: int = 4, particles: int = 8, count: int = 27) -> dict:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.tasks.observed.conftest import REPO
+from tests.plugins import REPO
 
 YIELD_STRESS, E, NU = 1e3, 5e4, 0.3
 

@@ -5,7 +5,6 @@ installed through a real entry point of the ``sga_agent.tasks`` group and search
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -17,8 +16,8 @@ from sga_agent.config import SearchConfig
 from sga_agent.events import ProposalReceived
 from sga_agent.proposers.base import Proposal
 from sga_agent.run_store import RunStore
+from tests.plugins import register_task
 
-REPO = Path(__file__).resolve().parents[3]
 #: The recorded answers the replay gives: (candidate, answer text).
 ANSWERS = [
     ("01-exploit-00", "Closer:\n```\n[1, 2, 2.5]\n```\n"),
@@ -33,15 +32,9 @@ def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]
     """The task registered by a dist-info on the path, here and for every process started
     with the returned environment (the CLI, its capture and fit workers)."""
     site = tmp_path / "site"
-    info = site / "numbers_task-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: numbers-task\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(
-        "[sga_agent.tasks]\nnumbers = tests.tasks.third_party.numbers_task:NumbersTask\n"
-    )
+    env = register_task(site, "numbers", "tests.tasks.third_party.numbers_task:NumbersTask")
     monkeypatch.syspath_prepend(str(site))
-    path = os.pathsep.join(filter(None, [str(site), str(REPO), os.environ.get("PYTHONPATH")]))
-    return {**os.environ, "PYTHONPATH": path}
+    return env
 
 
 def recorded_run(parent: Path) -> Path:
