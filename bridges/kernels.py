@@ -1,22 +1,27 @@
-"""Taichi kernels that move one MPM step's data between torch tensors and Taichi arrays.
+"""Taichi kernels of one MPM step on torch tensors, and their hand-written reverse.
 
 A Taichi launch costs ~25 us per torch-tensor argument on this CPU, more than the copy itself,
 so each step's particle data crosses in one packed (B * N, 33) torch tensor (``COL_*``: x, v,
 C, F, stress in row-major order) and comes back in one (B * N, 24) tensor (x, v, C, F). Torch
-tensors are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU).
+tensors are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU), and the
+kernels read and write them directly: only the grids live in Taichi arrays.
 
 A step may advance B independent copies of a scene at once (a batch: the segments of a
-teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors being copy b.
-Copy b lives in slots ``2 b`` (the step's input) and ``2 b + 1`` (its output) of the
-time-indexed Taichi arrays that :mod:`taichi_mpm.kernels.transfer` works on, its grid in grid
-slot ``2 b``: the transfer functions index particles and grid with the same slot, so every copy
-keeps its own grid and walls. The differentiated kernels (:func:`p2g`, :func:`grid_update`,
-:func:`g2p`) hold nothing but their loops, as Taichi's autodiff requires.
+teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors being copy b,
+its grid row b of the (B, n^3) grid arrays, so every copy keeps its own grid and walls.
+
+The reverse pass is three launches: :func:`step_backward` redoes the step's P2G and grid update
+(the reverse reads the grid) and runs G2P's hand-written adjoint
+(:mod:`taichi_mpm.kernels.transfer_adjoint`); :func:`grid_update`'s Taichi autodiff carries
+the grid gradients through the walls; :func:`p2g_backward` runs P2G's hand-written adjoint.
+The per-particle functions are those of :mod:`taichi_mpm.kernels.transfer`, which
+``taichi_mpm.Simulator`` differentiates with Taichi's autodiff instead.
 """
 
 import taichi as ti
 
-from taichi_mpm.kernels.transfer import gather, scatter, update_node
+from taichi_mpm.kernels.transfer import g2p_particle, p2g_particle, update_node
+from taichi_mpm.kernels.transfer_adjoint import g2p_particle_adjoint, p2g_particle_adjoint
 
 #: Column offsets of the packed per-particle rows.
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24
@@ -49,42 +54,31 @@ def _put_mat(t: ti.template(), p, offset, value):
 
 
 @ti.func
-def _load_and_scatter(
+def _scatter_and_update(
     packed: ti.template(),
-    x: ti.template(),
-    v: ti.template(),
-    C: ti.template(),
-    F: ti.template(),
-    F_corrected: ti.template(),
-    stress: ti.template(),
     grid_mass: ti.template(),
     grid_momentum: ti.template(),
     grid_velocity: ti.template(),
     settings: ti.template(),
     serial: ti.template(),
 ):
-    """Load the packed input into each copy's input slot, then P2G and the grid update (all
-    the reverse pass needs recomputed: G2P's reverse reads only its inputs)."""
-    dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
-    B, N, n = x.shape[0] // 2, x.shape[1], grid_mass.shape[1]
+    """Clear every copy's grid, P2G of the packed input, the grid update."""
+    n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
+    B, nodes = grid_mass.shape[0], grid_mass.shape[1]
+    N = packed.shape[0] // B
+    ti.loop_config(serialize=serial)
+    for b, q in ti.ndrange(B, nodes):
+        grid_mass[b, q] = 0.0
+        grid_momentum[b, q] = ti.Vector.zero(float, 3)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
-        x[2 * b, p] = _vec(packed, row, COL_X)
-        v[2 * b, p] = _vec(packed, row, COL_V)
-        C[2 * b, p] = _mat(packed, row, COL_C)
-        F_corrected[2 * b, p] = _mat(packed, row, COL_F)
-        stress[2 * b, p] = _mat(packed, row, COL_STRESS)
+        p2g_particle(_vec(packed, row, COL_X), _vec(packed, row, COL_V),
+                     _mat(packed, row, COL_C), _mat(packed, row, COL_STRESS), grid_mass,
+                     grid_momentum, b, n, dx, dt, volume, mass)  # fmt: skip
     ti.loop_config(serialize=serial)
-    for b, i, j, k in ti.ndrange(B, n, n, n):
-        grid_mass[2 * b, i, j, k] = 0.0
-        grid_momentum[2 * b, i, j, k] = ti.Vector.zero(float, 3)
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(B, N):
-        scatter(x, v, C, stress, 2 * b, p, grid_mass, grid_momentum, dx, dt, volume, mass)
-    ti.loop_config(serialize=serial)
-    for b, i, j, k in ti.ndrange(B, n, n, n):
-        update_node(grid_mass, grid_momentum, 2 * b, i, j, k, grid_velocity, dt,
+    for b, q in ti.ndrange(B, nodes):
+        update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt,
                     ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
 
 
@@ -92,15 +86,10 @@ def _load_and_scatter(
 def step_forward(
     packed: ti.types.ndarray(),
     out: ti.types.ndarray(),
-    x: ti.types.ndarray(),
-    v: ti.types.ndarray(),
-    C: ti.types.ndarray(),
-    F: ti.types.ndarray(),
-    F_corrected: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
     grid_velocity: ti.types.ndarray(),
+    n: ti.i32,
     dx: float,
     dt: float,
     volume: float,
@@ -114,41 +103,36 @@ def step_forward(
     serial: ti.template(),
 ):
     """One step: packed (B * N, 33) input -> packed (B * N, 24) output (x, v, C, F_trial)."""
-    _load_and_scatter(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum,
-                      grid_velocity, (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness,
-                      friction), serial)  # fmt: skip
+    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity,
+                        (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
+                        serial)  # fmt: skip
+    B = grid_mass.shape[0]
+    N = packed.shape[0] // B
     ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
-        row = b * x.shape[1] + p
-        _put_vec(out, row, COL_X, x[2 * b + 1, p])
-        _put_vec(out, row, COL_V, v[2 * b + 1, p])
-        _put_mat(out, row, COL_C, C[2 * b + 1, p])
-        _put_mat(out, row, COL_F, F[2 * b + 1, p])
+    for b, p in ti.ndrange(B, N):
+        row = b * N + p
+        new_x, new_v, new_C, new_F = g2p_particle(_vec(packed, row, COL_X),
+                                                  _mat(packed, row, COL_F), grid_velocity, b, n,
+                                                  dx, dt)  # fmt: skip
+        _put_vec(out, row, COL_X, new_x)
+        _put_vec(out, row, COL_V, new_v)
+        _put_mat(out, row, COL_C, new_C)
+        _put_mat(out, row, COL_F, new_F)
 
 
 @ti.kernel
-def recompute_and_seed(
+def step_backward(
     packed: ti.types.ndarray(),
+    output: ti.types.ndarray(),
     output_grad: ti.types.ndarray(),
-    x: ti.types.ndarray(),
-    v: ti.types.ndarray(),
-    C: ti.types.ndarray(),
-    F: ti.types.ndarray(),
-    F_corrected: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
+    input_grad: ti.types.ndarray(),
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
     grid_velocity: ti.types.ndarray(),
-    x_grad: ti.types.ndarray(),
-    v_grad: ti.types.ndarray(),
-    C_grad: ti.types.ndarray(),
-    F_grad: ti.types.ndarray(),
-    F_corrected_grad: ti.types.ndarray(),
-    stress_grad: ti.types.ndarray(),
     grid_mass_grad: ti.types.ndarray(),
     grid_momentum_grad: ti.types.ndarray(),
     grid_velocity_grad: ti.types.ndarray(),
+    n: ti.i32,
     dx: float,
     dt: float,
     volume: float,
@@ -161,70 +145,32 @@ def recompute_and_seed(
     friction: float,
     serial: ti.template(),
 ):
-    """Redo the step's P2G and grid update (the reverse pass reads the grid), clear the
-    adjoints, seed dL/d(output)."""
-    _load_and_scatter(packed, x, v, C, F, F_corrected, stress, grid_mass, grid_momentum,
-                      grid_velocity, (dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness,
-                      friction), serial)  # fmt: skip
+    """First part of a step's reverse: redo P2G and the grid update, clear the grid
+    gradients, then G2P's adjoint: dL/d(grid velocity), and dL/dx (its G2P part) and dL/dF of
+    the packed (B * N, 33) ``input_grad`` from the (B * N, 24) ``output_grad``, given the
+    step's (B * N, 24) ``output``."""
+    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity,
+                        (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
+                        serial)  # fmt: skip
+    B, nodes = grid_mass.shape[0], grid_mass.shape[1]
+    N = packed.shape[0] // B
     ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
-        row = b * x.shape[1] + p
-        x_grad[2 * b, p] = ti.Vector.zero(float, 3)
-        v_grad[2 * b, p] = ti.Vector.zero(float, 3)
-        C_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
-        F_corrected_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
-        stress_grad[2 * b, p] = ti.Matrix.zero(float, 3, 3)
-        x_grad[2 * b + 1, p] = _vec(output_grad, row, COL_X)
-        v_grad[2 * b + 1, p] = _vec(output_grad, row, COL_V)
-        C_grad[2 * b + 1, p] = _mat(output_grad, row, COL_C)
-        F_grad[2 * b + 1, p] = _mat(output_grad, row, COL_F)
-    n = grid_mass.shape[1]
+    for b, q in ti.ndrange(B, nodes):
+        grid_mass_grad[b, q] = 0.0
+        grid_momentum_grad[b, q] = ti.Vector.zero(float, 3)
+        grid_velocity_grad[b, q] = ti.Vector.zero(float, 3)
     ti.loop_config(serialize=serial)
-    for b, i, j, k in ti.ndrange(x.shape[0] // 2, n, n, n):
-        grid_mass_grad[2 * b, i, j, k] = 0.0
-        grid_momentum_grad[2 * b, i, j, k] = ti.Vector.zero(float, 3)
-        grid_velocity_grad[2 * b, i, j, k] = ti.Vector.zero(float, 3)
-
-
-@ti.kernel
-def store_input_gradients(
-    x_grad: ti.types.ndarray(),
-    v_grad: ti.types.ndarray(),
-    C_grad: ti.types.ndarray(),
-    F_corrected_grad: ti.types.ndarray(),
-    stress_grad: ti.types.ndarray(),
-    input_grad: ti.types.ndarray(),
-    serial: ti.template(),
-):
-    """dL/d(input) from the input-slot adjoints into one packed (B * N, 33) torch tensor."""
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(x_grad.shape[0] // 2, x_grad.shape[1]):
-        row = b * x_grad.shape[1] + p
-        _put_vec(input_grad, row, COL_X, x_grad[2 * b, p])
-        _put_vec(input_grad, row, COL_V, v_grad[2 * b, p])
-        _put_mat(input_grad, row, COL_C, C_grad[2 * b, p])
-        _put_mat(input_grad, row, COL_F, F_corrected_grad[2 * b, p])
-        _put_mat(input_grad, row, COL_STRESS, stress_grad[2 * b, p])
-
-
-@ti.kernel
-def p2g(
-    x: ti.types.ndarray(),
-    v: ti.types.ndarray(),
-    C: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    grid_mass: ti.types.ndarray(),
-    grid_momentum: ti.types.ndarray(),
-    dx: float,
-    dt: float,
-    volume: float,
-    mass: float,
-    serial: ti.template(),
-):
-    """P2G of every copy onto its own grid (differentiated by the backward pass)."""
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
-        scatter(x, v, C, stress, 2 * b, p, grid_mass, grid_momentum, dx, dt, volume, mass)
+    for b, p in ti.ndrange(B, N):
+        row = b * N + p
+        x_grad, F_grad = g2p_particle_adjoint(
+            _vec(packed, row, COL_X), _mat(packed, row, COL_F), _vec(output, row, COL_V),
+            _mat(output, row, COL_C), grid_velocity, grid_velocity_grad, b, n, dx, dt,
+            _vec(output_grad, row, COL_X),
+            _vec(output_grad, row, COL_V), _mat(output_grad, row, COL_C),
+            _mat(output_grad, row, COL_F),
+        )  # fmt: skip
+        _put_vec(input_grad, row, COL_X, x_grad)
+        _put_mat(input_grad, row, COL_F, F_grad)
 
 
 @ti.kernel
@@ -232,6 +178,7 @@ def grid_update(
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
     grid_velocity: ti.types.ndarray(),
+    n: ti.i32,
     dt: float,
     gx: float,
     gy: float,
@@ -241,31 +188,42 @@ def grid_update(
     friction: float,
     serial: ti.template(),
 ):
-    """Grid update of every copy's grid (differentiated by the backward pass)."""
+    """Grid update of every copy's grid (differentiated by the reverse pass)."""
     ti.loop_config(serialize=serial)
-    for b, i, j, k in ti.ndrange(
-        grid_mass.shape[0] // 2, grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]
-    ):
-        update_node(grid_mass, grid_momentum, 2 * b, i, j, k, grid_velocity, dt,
+    for b, q in ti.ndrange(grid_mass.shape[0], grid_mass.shape[1]):
+        update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt,
                     ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
 
 
 @ti.kernel
-def g2p(
-    x: ti.types.ndarray(),
-    v: ti.types.ndarray(),
-    C: ti.types.ndarray(),
-    F: ti.types.ndarray(),
-    F_corrected: ti.types.ndarray(),
-    grid_velocity: ti.types.ndarray(),
+def p2g_backward(
+    packed: ti.types.ndarray(),
+    grid_mass_grad: ti.types.ndarray(),
+    grid_momentum_grad: ti.types.ndarray(),
+    input_grad: ti.types.ndarray(),
+    n: ti.i32,
     dx: float,
     dt: float,
+    volume: float,
+    mass: float,
     serial: ti.template(),
 ):
-    """G2P of every copy from its own grid (differentiated by the backward pass)."""
+    """Last part of a step's reverse: P2G's adjoint adds its dL/dx to ``input_grad`` and
+    writes dL/dv, dL/dC and dL/d stress."""
+    B = grid_mass_grad.shape[0]
+    N = packed.shape[0] // B
     ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(x.shape[0] // 2, x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, 2 * b, p, dx, dt)
+    for b, p in ti.ndrange(B, N):
+        row = b * N + p
+        x_grad, v_grad, C_grad, stress_grad = p2g_particle_adjoint(
+            _vec(packed, row, COL_X), _vec(packed, row, COL_V), _mat(packed, row, COL_C),
+            _mat(packed, row, COL_STRESS), grid_mass_grad, grid_momentum_grad, b, n, dx, dt,
+            volume, mass,
+        )  # fmt: skip
+        _put_vec(input_grad, row, COL_X, _vec(input_grad, row, COL_X) + x_grad)
+        _put_vec(input_grad, row, COL_V, v_grad)
+        _put_mat(input_grad, row, COL_C, C_grad)
+        _put_mat(input_grad, row, COL_STRESS, stress_grad)
 
 
 @ti.kernel

@@ -4,8 +4,8 @@
 
     (x, v, C, F_corrected, stress) -> (x', v', C', F_trial'),
 
-runs P2G, the grid update and G2P in Taichi, and in backward runs the Taichi gradient kernels
-of those phases. The constitutive laws stay outside, in torch, so a law written as an
+runs P2G, the grid update and G2P in Taichi, and in backward runs their reverse in Taichi
+(:mod:`bridges.kernels`). The constitutive laws stay outside, in torch, so a law written as an
 ``nn.Module`` is differentiated by torch and the simulator by Taichi::
 
     transfer = Transfer(scene)
@@ -61,62 +61,48 @@ class Transfer:
         if parallel is None:
             parallel = runtime.parallel_worthwhile(batch * scene.num_particles)
         self._serial = not parallel
-        n, N = scene.grid_resolution, scene.num_particles
-        vec, mat = ti.types.vector(3, info.dtype), ti.types.matrix(3, 3, info.dtype)
-        scalar = info.dtype
+        n = scene.grid_resolution
+        vec = ti.types.vector(3, info.dtype)
 
-        def array(element, shape):
-            return ti.ndarray(element, shape=shape, needs_grad=True)
+        def grid(element):  # copy b: row b, a flat row of n^3 nodes
+            return ti.ndarray(element, shape=(batch, n**3), needs_grad=True)
 
-        slots = 2 * batch  # copy b: input slot 2b, output slot 2b + 1, grid slot 2b
-        self.x, self.v = array(vec, (slots, N)), array(vec, (slots, N))
-        self.C, self.F = array(mat, (slots, N)), array(mat, (slots, N))
-        self.F_corrected, self.stress = array(mat, (slots, N)), array(mat, (slots, N))
-        self.grid_mass = array(scalar, (slots, n, n, n))
-        self.grid_momentum = array(vec, (slots, n, n, n))
-        self.grid_velocity = array(vec, (slots, n, n, n))
+        self.grid_mass, self.grid_momentum = grid(info.dtype), grid(vec)
+        self.grid_velocity = grid(vec)
         walls = scene.walls
         friction = walls.friction if walls.kind == "separate" else 0.0
-        self._settings = (
-            scene.dx, scene.dt, scene.particle_volume, scene.particle_mass, *scene.gravity,
-            _WALL_CODES[walls.kind], walls.thickness, friction,
-        )  # fmt: skip
-        self._grid_settings = (scene.dt, *scene.gravity, _WALL_CODES[walls.kind],
+        self._grid_settings = (n, scene.dt, *scene.gravity, _WALL_CODES[walls.kind],
                                walls.thickness, friction)  # fmt: skip
+        self._particle_settings = (n, scene.dx, scene.dt, scene.particle_volume,
+                                   scene.particle_mass)  # fmt: skip
+        self._settings = (*self._particle_settings, *self._grid_settings[2:])
 
     @property
     def num_particles(self) -> int:
         """Particles of one step: all copies'."""
         return self.batch * self.scene.num_particles
 
-    def _arrays(self):
-        return (self.x, self.v, self.C, self.F, self.F_corrected, self.stress, self.grid_mass,
-                self.grid_momentum, self.grid_velocity)  # fmt: skip
+    def _grids(self):
+        return self.grid_mass, self.grid_momentum, self.grid_velocity
 
     def forward(self, packed: torch.Tensor) -> torch.Tensor:
         """Packed (B * N, 24) next state (x, v, C, F_trial) from a packed (B * N, 33) input."""
         out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
-        kernels.step_forward(packed, out, *self._arrays(), *self._settings, self._serial)
+        kernels.step_forward(packed, out, *self._grids(), *self._settings, self._serial)
         return out
 
-    def backward(self, packed: torch.Tensor, output_grad: torch.Tensor) -> torch.Tensor:
-        """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 24)
-        dL/d(output)."""
-        arrays = self._arrays()
-        kernels.recompute_and_seed(packed, output_grad, *arrays, *(a.grad for a in arrays),
-                                   *self._settings, self._serial)  # fmt: skip
-        sc = self.scene
-        kernels.g2p.grad(self.x, self.v, self.C, self.F, self.F_corrected, self.grid_velocity,
-                         sc.dx, sc.dt, self._serial)  # fmt: skip
-        kernels.grid_update.grad(self.grid_mass, self.grid_momentum, self.grid_velocity,
-                                 *self._grid_settings, self._serial)  # fmt: skip
-        kernels.p2g.grad(self.x, self.v, self.C, self.stress, self.grid_mass,
-                         self.grid_momentum, sc.dx, sc.dt, sc.particle_volume, sc.particle_mass,
-                         self._serial)  # fmt: skip
+    def backward(self, packed: torch.Tensor, output: torch.Tensor,
+                 output_grad: torch.Tensor) -> torch.Tensor:  # fmt: skip
+        """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 33) input, its
+        (B * N, 24) output and dL/d(output)."""
+        grids = self._grids()
         input_grad = packed.new_empty(packed.shape)
-        kernels.store_input_gradients(self.x.grad, self.v.grad, self.C.grad,
-                                      self.F_corrected.grad, self.stress.grad, input_grad,
-                                      self._serial)  # fmt: skip
+        kernels.step_backward(packed, output, output_grad.contiguous(), input_grad, *grids,
+                              *(g.grad for g in grids), *self._settings,
+                              self._serial)  # fmt: skip
+        kernels.grid_update.grad(*grids, *self._grid_settings, self._serial)
+        kernels.p2g_backward(packed, self.grid_mass.grad, self.grid_momentum.grad, input_grad,
+                             *self._particle_settings, self._serial)  # fmt: skip
         return input_grad
 
 
@@ -148,7 +134,10 @@ class _MPMStep(torch.autograd.Function):
         # the inputs, not their packed copy: x, v and C are views of the previous step's
         # output, which the graph keeps anyway, so only F and stress cost memory
         ctx.save_for_backward(x, v, C, F, stress)
-        return _unpack(transfer.forward(_packed(transfer, x, v, C, F, stress)), (3, 3, 9, 9))
+        # the packed output: the next step's inputs are views of it, so it costs no memory
+        # (a plain tensor without a graph: holding it makes no reference cycle)
+        ctx.output = transfer.forward(_packed(transfer, x, v, C, F, stress))
+        return _unpack(ctx.output, (3, 3, 9, 9))
 
     @staticmethod
     def backward(ctx, *output_grads):
@@ -162,7 +151,8 @@ class _MPMStep(torch.autograd.Function):
             ],
             dim=1,
         )
-        return (*_unpack(ctx.transfer.backward(packed, output_grad), (3, 3, 9, 9, 9)), None)
+        input_grad = ctx.transfer.backward(packed, ctx.output, output_grad)
+        return (*_unpack(input_grad, (3, 3, 9, 9, 9)), None)
 
 
 def _packed(transfer: Transfer, x, v, C, F, stress) -> torch.Tensor:

@@ -136,9 +136,9 @@ class Simulator:
         self.F = array(mat, (k + 1, N))
         self.F_corrected = array(mat, (k, N))
         self.stress = array(mat, (k, N))
-        self.grid_mass = array(dt, (k, n, n, n))
-        self.grid_momentum = array(vec, (k, n, n, n))
-        self.grid_velocity = array(vec, (k, n, n, n))
+        self.grid_mass = array(dt, (k, n**3))  # one flat row of nodes per step
+        self.grid_momentum = array(vec, (k, n**3))
+        self.grid_velocity = array(vec, (k, n**3))
         self.params = array(dt, (len(PARAMETER_INDEX),))
         self._state = (self.x, self.v, self.C, self.F)
         self._checkpoints = (
@@ -256,6 +256,7 @@ class Simulator:
             self._coefficients["elastic"],
         )
         settings = (
+            sc.grid_resolution,
             self._material.elastic_kind,
             int(self._share_basis),
             self._tol,
@@ -297,6 +298,7 @@ class Simulator:
             s,
             self.grid_mass,
             self.grid_momentum,
+            sc.grid_resolution,
             sc.dx,
             sc.dt,
             sc.particle_volume,
@@ -310,6 +312,7 @@ class Simulator:
             self.grid_mass,
             self.grid_momentum,
             s,
+            sc.grid_resolution,
             self.grid_velocity,
             sc.dt,
             *sc.gravity,
@@ -329,6 +332,7 @@ class Simulator:
             self.F_corrected,
             self.grid_velocity,
             s,
+            sc.grid_resolution,
             sc.dx,
             sc.dt,
             self._serial,

@@ -51,6 +51,14 @@ def matvec(A, b):
 
 
 @ti.func
+def t_matvec(A, b):
+    """A^T @ b for a 3x3 matrix and a 3-vector."""
+    return ti.Vector(
+        [A[0, i] * b[0] + A[1, i] * b[1] + A[2, i] * b[2] for i in ti.static(range(3))]
+    )
+
+
+@ti.func
 def outer(a, b):
     """a b^T for 3-vectors."""
     return ti.Matrix([[a[i] * b[j] for j in ti.static(range(3))] for i in ti.static(range(3))])

