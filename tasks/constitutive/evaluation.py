@@ -63,10 +63,14 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
 
 
 def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
-    """Load the ground truth and launch the bridge's kernels once, serial and batched (a known
-    plastic law with an SVD, forward and backward, on a few 2-step segments that start from
-    the observed reset states; the loss is meaningless), so that the first evaluation pays for
-    neither loading nor compiling them."""
+    """Load the ground truth and launch the bridge's kernels once (a known plastic law with
+    an SVD on a few 2-step segments that start from the observed reset states; the loss is
+    meaningless), so that the first evaluation pays for neither loading nor compiling them.
+
+    Launched as an evaluation launches them: one scene copy forward (the graph-memory
+    measurement), a batch of copies forward and backward (the epochs). A copy alone backward
+    (no teacher forcing, or a short last segment) is left to compile when first needed: each
+    kernel costs Taichi's front end ~1 s per process even when its offline cache has it."""
     ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()
     observed = ground_truth(spec, options.steps)
@@ -76,9 +80,9 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     plastic = torch_laws.VonMises(yield_stress=KNOWN_ELASTIC.E * 1e-3, E=KNOWN_ELASTIC.E,
                                   nu=KNOWN_ELASTIC.nu, dtype=dtype)  # fmt: skip
     rollout = Rollout(scene, plastic, known_elastic_law(dtype))
-    for batch in (1, segments):
+    for batch, backward in ((1, False), (segments, True)):
         trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
-                        batch=batch)  # fmt: skip
+                        backward=backward, batch=batch)  # fmt: skip
 
 
 def fit(
