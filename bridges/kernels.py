@@ -11,23 +11,17 @@ teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors
 its grid row b of the (B, n^3) grid arrays, so every copy keeps its own grid and walls.
 
 The reverse pass is three launches: :func:`step_backward` redoes the step's P2G and grid update
-(the reverse reads the grid) and runs G2P's hand-written adjoint; :func:`grid_update`'s
-Taichi autodiff carries the grid gradients through the walls; :func:`p2g_backward` runs P2G's
-hand-written adjoint. The per-particle functions are the looped ones of
-:mod:`taichi_mpm.kernels.transfer_loops` (fast to compile), which compute what the unrolled
-ones of :mod:`taichi_mpm.kernels.transfer` compute; ``taichi_mpm.Simulator`` differentiates
-those with Taichi's autodiff instead.
+(the reverse reads the grid) and runs G2P's hand-written adjoint
+(:mod:`taichi_mpm.kernels.transfer_adjoint`); :func:`grid_update`'s Taichi autodiff carries
+the grid gradients through the walls; :func:`p2g_backward` runs P2G's hand-written adjoint.
+The per-particle functions are those of :mod:`taichi_mpm.kernels.transfer`, which
+``taichi_mpm.Simulator`` differentiates with Taichi's autodiff instead.
 """
 
 import taichi as ti
 
-from taichi_mpm.kernels.transfer import update_node
-from taichi_mpm.kernels.transfer_loops import (
-    g2p_particle,
-    g2p_particle_adjoint,
-    p2g_particle,
-    p2g_particle_adjoint,
-)
+from taichi_mpm.kernels.transfer import g2p_particle, p2g_particle, update_node
+from taichi_mpm.kernels.transfer_adjoint import g2p_particle_adjoint, p2g_particle_adjoint
 
 #: Column offsets of the packed per-particle rows.
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24

@@ -1,8 +1,8 @@
 """The bridge's hand-written reverse of a step equals Taichi's autodiff of the same step.
 
-taichi_mpm differentiates its per-phase kernels (P2G, grid update, G2P, stencils unrolled)
-with Taichi's autodiff; the bridge runs the looped functions and hand-written adjoints of
-:mod:`taichi_mpm.kernels.transfer_loops` instead. On one step of random states, particles
+taichi_mpm differentiates its per-phase kernels (P2G, grid update, G2P) with Taichi's
+autodiff; the bridge runs the hand-written adjoints of
+:mod:`taichi_mpm.kernels.transfer_adjoint` instead. On one step of random states, particles
 against every kind of wall included, the two give the same next state and the same input
 gradients to round-off (float64).
 """
