@@ -100,7 +100,8 @@ def current() -> RuntimeInfo:
     return _current
 
 
-def parallel_worthwhile(items: int) -> bool:
-    """Whether a loop over ``items`` particles should run in parallel on this runtime."""
+def parallel_worthwhile(items: int, minimum: int = PARALLEL_MIN_ITEMS) -> bool:
+    """Whether a loop over ``items`` particles should run in parallel on this runtime: always
+    on a GPU, on a CPU from ``minimum`` items when Taichi has more than one thread."""
     info = current()
-    return info.arch != "cpu" or (info.threads > 1 and items >= PARALLEL_MIN_ITEMS)
+    return info.arch != "cpu" or (info.threads > 1 and items >= minimum)
