@@ -64,12 +64,12 @@ def mpm_step(
         grid_mass[s, q] = 0.0
         grid_momentum[s, q] = ti.Vector.zero(float, 3)
     for p in range(x.shape[1]):
-        scatter(x, v, C, stress, s, p, grid_mass, grid_momentum, s, n, dx, dt, volume, mass)
+        scatter(x, v, C, stress, s, p, grid_mass, grid_momentum, n, dx, dt, volume, mass)
     for q in range(grid_mass.shape[1]):
         update_node(grid_mass, grid_momentum, s, q, n, grid_velocity, dt,
                     ti.Vector([gx, gy, gz]), kind, thickness, friction)  # fmt: skip
     for p in range(x.shape[1]):
-        gather(x, v, C, F, Fc, grid_velocity, s, p, s, n, dx, dt)
+        gather(x, v, C, F, Fc, grid_velocity, s, p, n, dx, dt)
 
 
 @ti.kernel

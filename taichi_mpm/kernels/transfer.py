@@ -96,16 +96,15 @@ def scatter(
     p,
     grid_mass: ti.template(),
     grid_momentum: ti.template(),
-    grid_slot,
     n,
     dx,
     dt,
     particle_volume,
     particle_mass,
 ):
-    """:func:`p2g_particle` of particle p of time slot ``slot``."""
+    """:func:`p2g_particle` of particle p of time slot ``slot`` onto grid slot ``slot``."""
     p2g_particle(x[slot, p], v[slot, p], C[slot, p], stress[slot, p], grid_mass, grid_momentum,
-                 grid_slot, n, dx, dt, particle_volume, particle_mass)  # fmt: skip
+                 slot, n, dx, dt, particle_volume, particle_mass)  # fmt: skip
 
 
 @ti.func
@@ -164,14 +163,14 @@ def gather(
     grid_velocity: ti.template(),
     slot,
     p,
-    grid_slot,
     n,
     dx,
     dt,
 ):
-    """:func:`g2p_particle` of particle p of time slot ``slot``, stored at ``slot + 1``."""
+    """:func:`g2p_particle` of particle p of time slot ``slot`` from grid slot ``slot``, stored
+    at ``slot + 1``."""
     new_x, new_v, new_C, new_F = g2p_particle(x[slot, p], F_corrected[slot, p], grid_velocity,
-                                              grid_slot, n, dx, dt)  # fmt: skip
+                                              slot, n, dx, dt)  # fmt: skip
     v[slot + 1, p] = new_v
     C[slot + 1, p] = new_C
     x[slot + 1, p] = new_x
@@ -197,7 +196,7 @@ def p2g(
     """Scatter mass, momentum and the stress impulse of every particle to grid row slot."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        scatter(x, v, C, stress, slot, p, grid_mass, grid_momentum, slot, n, dx, dt,
+        scatter(x, v, C, stress, slot, p, grid_mass, grid_momentum, n, dx, dt,
                 particle_volume, particle_mass)  # fmt: skip
 
 
@@ -241,4 +240,4 @@ def g2p(
     """Gather velocity and affine velocity; advect; state of step slot + 1."""
     ti.loop_config(serialize=serial)
     for p in range(x.shape[1]):
-        gather(x, v, C, F, F_corrected, grid_velocity, slot, p, slot, n, dx, dt)
+        gather(x, v, C, F, F_corrected, grid_velocity, slot, p, n, dx, dt)
