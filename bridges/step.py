@@ -31,8 +31,8 @@ from taichi_mpm.scene import Scene
 _WALL_CODES = {"slip": tk.SLIP, "sticky": tk.STICKY, "separate": tk.SEPARATE}
 #: A step's particles from which its CPU loops run in parallel (when Taichi has more than one
 #: thread): P2G and the G2P adjoint scatter with atomic adds there. Measured on 2 threads
-#: (``ec68694``, paper scene copies, forward + reverse): 10,000 particles took 14.9 ms serial
-#: against 16.3 ms parallel, 100,000 took 143 ms against 123 ms.
+#: (``benchmarks/bridge_step.py --threads 2 --loops serial parallel``): 10,000 particles took
+#: 15.3 ms serial against 18.4 ms parallel, 100,000 took 130 ms against 120 ms.
 PARALLEL_MIN_PARTICLES = 32_768
 
 

@@ -6,11 +6,9 @@ autodiff needs no bookkeeping. The 27-node stencil is unrolled with ``ti.static`
 dynamic stencil loops gave wrong gradients in Taichi 1.7.
 
 A grid slot is one flat row of ``n^3`` nodes, node (i, j, k) at ``(i * n + j) * n + k``
-(:func:`node_index`): loops over a grid are then plain 1D loops, and a particle's 27 nodes are
-one base offset plus constants. Measured on the paper scene's batched step (Taichi 1.7.4,
-x64, one thread), this made clearing 7x, the grid update 3x and P2G 2x faster than 4D
-``(slot, i, j, k)`` arrays looped with ``ndrange``, which divide the loop index three times per
-node.
+(:func:`node_index`): loops over a grid are then plain 1D loops (a 4D ``ndrange`` divides its
+loop index three times per node), and a particle's 27 nodes are one base offset plus
+constants.
 """
 
 import taichi as ti

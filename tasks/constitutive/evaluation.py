@@ -69,8 +69,9 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
 
     Launched as an evaluation launches them: one scene copy forward (the graph-memory
     measurement), a batch of copies forward and backward (the epochs). A copy alone backward
-    (no teacher forcing, or a short last segment) is left to compile when first needed: each
-    kernel costs Taichi's front end ~1 s per process even when its offline cache has it."""
+    (no teacher forcing, or a short last segment) is left to compile when first needed: Taichi
+    runs its Python front end on each kernel in every process, even when its offline cache
+    has it."""
     ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()
     observed = ground_truth(spec, options.steps)
