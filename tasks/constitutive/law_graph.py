@@ -28,6 +28,7 @@ names, and those are short identifiers.
 from __future__ import annotations
 
 import math
+import operator
 import re
 from dataclasses import dataclass
 from typing import Any
@@ -35,7 +36,7 @@ from typing import Any
 import torch
 from torch import fx, nn
 
-from bridges import linalg
+from bridges import closed_form, linalg
 from tasks.constitutive import law_ops
 
 FORMAT = law_ops.GRAPH_FORMAT
@@ -194,7 +195,19 @@ def _compile(law: GraphLaw, graph: LawGraph, dtype: torch.dtype) -> fx.GraphModu
         )
         inputs["node"].append(node)
     built.output(resolve(graph.output))
+    _keep_lu_where_used(built)
     return fx.GraphModule(law, built, class_name="CapturedLaw")
+
+
+def _keep_lu_where_used(graph: fx.Graph) -> None:
+    """Back to ATen's ``_linalg_det`` wherever the graph reads its LU factors or pivots,
+    which :func:`closed_form_det` does not compute."""
+    for node in graph.nodes:
+        if node.target is not closed_form_det:
+            continue
+        if any(user.target is not operator.getitem or (user.args[1] != 0 and user.users)
+               for user in node.users):  # fmt: skip
+            node.target = torch.ops.aten._linalg_det.default
 
 
 def _target(op: str) -> Any:
@@ -204,6 +217,10 @@ def _target(op: str) -> Any:
     _, name, overload_name = op.split(".")
     if name == "_linalg_svd" and overload_name == "default":
         return stable_svd
+    if name == "_linalg_det" and overload_name == "default":
+        return closed_form_det
+    if name == "linalg_inv_ex" and overload_name == "default":
+        return closed_form_inverse
     packet = getattr(torch.ops.aten, name, None)
     overload = getattr(packet, overload_name, None) if packet is not None else None
     if not isinstance(overload, torch._ops.OpOverload):
@@ -234,6 +251,25 @@ def stable_svd(
     if compute_uv and driver is None and A.shape[-2:] == (3, 3) and A.dtype.is_floating_point:
         return linalg.svd(A, signed=False)
     return torch.ops.aten._linalg_svd.default(A, full_matrices, compute_uv, driver=driver)
+
+
+def closed_form_det(A: torch.Tensor) -> tuple[torch.Tensor, Any, Any]:
+    """``aten._linalg_det`` by :func:`bridges.closed_form.det3` for 3x3 inputs; the LU factors
+    and pivots are not computed (None), so it stands only where the graph reads neither."""
+    if not closed_form.applies(A):
+        return torch.ops.aten._linalg_det.default(A)
+    return closed_form.det3(A), None, None
+
+
+def closed_form_inverse(
+    A: torch.Tensor, check_errors: bool = False
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``aten.linalg_inv_ex`` by :func:`bridges.closed_form.inv3` for 3x3 inputs; ``info`` is
+    1 for an exactly singular matrix, as LU reports a zero pivot."""
+    if check_errors or not closed_form.applies(A):
+        return torch.ops.aten.linalg_inv_ex.default(A, check_errors=check_errors)
+    info = (closed_form.det3(A.detach()) == 0).to(torch.int32)
+    return closed_form.inv3(A), info
 
 
 def _literal(kind: str, payload: str, dtype: torch.dtype) -> Any:

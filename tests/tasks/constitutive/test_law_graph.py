@@ -31,6 +31,8 @@ from tasks.constitutive.law_graph import (
     LawGraph,
     LawGraphError,
     build_law,
+    closed_form_det,
+    closed_form_inverse,
 )
 
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
@@ -489,3 +491,72 @@ def test_edge_cases_are_refused_as_bad_graphs(case):
     EDGE_CASES[case](doc)
     with pytest.raises(LawGraphError):
         build_law(doc, torch.float64)
+
+
+# ------------------------------------------------- determinants and inverses in closed form
+
+INVERSE_AND_DET_LAW = '''
+import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def __init__(self, mu: float = 2.0):
+        super().__init__()
+        self.mu = nn.Parameter(torch.tensor(mu))
+
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        J = torch.det(F).view(-1, 1, 1)
+        return self.mu * (F - torch.inverse(F).mT) + torch.log(J) * torch.linalg.inv(F @ F.mT)
+'''
+
+
+def calls(law) -> list:
+    return [node.target for node in law._graph_module.graph.nodes if node.op == "call_function"]
+
+
+def test_determinants_and_inverses_run_in_closed_form_and_reproduce_the_law():
+    document = assert_graph_reproduces(INVERSE_AND_DET_LAW)
+    targets = calls(build_law(document, torch.float64))
+    assert targets.count(closed_form_det) == 1 and targets.count(closed_form_inverse) == 2
+    assert not {torch.ops.aten._linalg_det.default, torch.ops.aten.linalg_inv_ex.default} & set(
+        targets
+    )
+
+
+def test_an_exactly_singular_input_is_refused_as_torch_refuses_it():
+    law = build_law(capture_law(INVERSE_AND_DET_LAW), torch.float64)
+    F = deformations(batch=4)
+    F[2] = torch.tensor([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 5.0]], dtype=F.dtype)
+    with pytest.raises(RuntimeError, match="singular"):
+        law(F)
+    with pytest.raises(RuntimeError, match="singular"):
+        torch.inverse(F)
+
+
+def test_a_graph_reading_the_lu_factors_of_its_determinant_keeps_atens():
+    def det_graph(read: int) -> dict:
+        return {
+            "format": 1,
+            "parameters": [],
+            "constants": [],
+            "nodes": [
+                {"op": "aten._linalg_det.default", "args": [{"input": 0}], "kwargs": {}},
+                {"op": "operator.getitem", "args": [{"node": 0}, 0], "kwargs": {}},
+                {"op": "operator.getitem", "args": [{"node": 0}, read], "kwargs": {}},
+                {"op": "aten.view.default", "args": [{"node": 1}, [-1, 1, 1]], "kwargs": {}},
+                {"op": "aten.mul.Tensor", "args": [{"node": 2}, {"node": 3}], "kwargs": {}},
+            ],
+            "output": {"node": 4},
+        }
+
+    F = deformations(batch=4)
+    lu_read = build_law(det_graph(1), torch.float64)
+    assert torch.ops.aten._linalg_det.default in calls(lu_read)
+    assert closed_form_det not in calls(lu_read)
+    det, LU, _ = torch.ops.aten._linalg_det.default(F)
+    assert torch.equal(lu_read(F), LU * det.view(-1, 1, 1))
+    only_det = build_law(det_graph(0), torch.float64)  # getitem 0 twice: closed form
+    assert closed_form_det in calls(only_det)
+    det = torch.linalg.det(F)
+    assert torch.allclose(only_det(F), det * det.view(-1, 1, 1), rtol=1e-13)
