@@ -4,11 +4,11 @@ On the CPU, ``torch.linalg.det`` and ``torch.linalg.inv`` of a (B, 3, 3) batch r
 factorisation per matrix, forward and backward; the cofactor formulas below are a few dozen
 operations on (B,) vectors instead. For B = 10,000 in float32 on one thread,
 ``benchmarks/law_ops.py`` measured the determinant 2.8x faster forward and backward (681
-against 1885 us) and the inverse 1.3x (1870 against 2372 us). Their gradients come from torch's autograd of the same formulas,
-so they are exact derivatives of what is computed. Round-off is that of the cofactor
-expansion: for well-conditioned matrices (deformation gradients near the identity) it
-matches LU to a few units in the last place; like LU, the inverse's relative error grows
-with the condition number.
+against 1885 us) and the inverse 1.3x (1870 against 2372 us). Their gradients come from
+torch's autograd of the same formulas, so they are exact derivatives of what is computed.
+Round-off is that of the cofactor expansion: for well-conditioned matrices (deformation
+gradients near the identity) it matches LU to a few units in the last place; like LU, the
+inverse's relative error grows with the condition number.
 
 Used by :mod:`tasks.constitutive.law_graph` in place of ATen's determinant and inverse for
 (..., 3, 3) floating-point inputs.

@@ -10,18 +10,22 @@ A step may advance B independent copies of a scene at once (a batch: the segment
 teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors being copy b,
 its grid row b of the (B, n^3) grid arrays, so every copy keeps its own grid and walls.
 
-The reverse pass is three launches: :func:`step_backward` redoes the step's P2G and grid update
-(the reverse reads the grid) and runs G2P's hand-written adjoint
-(:mod:`taichi_mpm.kernels.transfer_adjoint`); :func:`grid_update`'s Taichi autodiff carries
-the grid gradients through the walls; :func:`p2g_backward` runs P2G's hand-written adjoint.
-The per-particle functions are those of :mod:`taichi_mpm.kernels.transfer`, which
-``taichi_mpm.Simulator`` differentiates with Taichi's autodiff instead.
+The reverse pass is one launch, :func:`step_backward`: it redoes the step's P2G and grid update
+(the reverse reads the grid), then runs the hand-written adjoints
+(:mod:`taichi_mpm.kernels.transfer_adjoint`) of G2P, of the grid update (walls included) and
+of P2G. The per-particle and per-node functions are those of
+:mod:`taichi_mpm.kernels.transfer`, which ``taichi_mpm.Simulator`` differentiates with Taichi's
+autodiff instead.
 """
 
 import taichi as ti
 
 from taichi_mpm.kernels.transfer import g2p_particle, p2g_particle, update_node
-from taichi_mpm.kernels.transfer_adjoint import g2p_particle_adjoint, p2g_particle_adjoint
+from taichi_mpm.kernels.transfer_adjoint import (
+    g2p_particle_adjoint,
+    p2g_particle_adjoint,
+    update_node_adjoint,
+)
 
 #: Column offsets of the packed per-particle rows.
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24
@@ -145,10 +149,9 @@ def step_backward(
     friction: float,
     serial: ti.template(),
 ):
-    """First part of a step's reverse: redo P2G and the grid update, clear the grid
-    gradients, then G2P's adjoint: dL/d(grid velocity), and dL/dx (its G2P part) and dL/dF of
-    the packed (B * N, 33) ``input_grad`` from the (B * N, 24) ``output_grad``, given the
-    step's (B * N, 24) ``output``."""
+    """A step's reverse: the packed (B * N, 33) ``input_grad`` (dL/d x, v, C, F, stress) from
+    the (B * N, 24) ``output_grad``, given the step's (B * N, 24) ``output``. Redoes P2G and
+    the grid update, then runs the adjoints of G2P, the grid update and P2G in turn."""
     _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity,
                         (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
                         serial)  # fmt: skip
@@ -156,8 +159,6 @@ def step_backward(
     N = packed.shape[0] // B
     ti.loop_config(serialize=serial)
     for b, q in ti.ndrange(B, nodes):
-        grid_mass_grad[b, q] = 0.0
-        grid_momentum_grad[b, q] = ti.Vector.zero(float, 3)
         grid_velocity_grad[b, q] = ti.Vector.zero(float, 3)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
@@ -171,47 +172,11 @@ def step_backward(
         )  # fmt: skip
         _put_vec(input_grad, row, COL_X, x_grad)
         _put_mat(input_grad, row, COL_F, F_grad)
-
-
-@ti.kernel
-def grid_update(
-    grid_mass: ti.types.ndarray(),
-    grid_momentum: ti.types.ndarray(),
-    grid_velocity: ti.types.ndarray(),
-    n: ti.i32,
-    dt: float,
-    gx: float,
-    gy: float,
-    gz: float,
-    wall_kind: ti.i32,
-    thickness: ti.i32,
-    friction: float,
-    serial: ti.template(),
-):
-    """Grid update of every copy's grid (differentiated by the reverse pass)."""
     ti.loop_config(serialize=serial)
-    for b, q in ti.ndrange(grid_mass.shape[0], grid_mass.shape[1]):
-        update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt,
-                    ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
-
-
-@ti.kernel
-def p2g_backward(
-    packed: ti.types.ndarray(),
-    grid_mass_grad: ti.types.ndarray(),
-    grid_momentum_grad: ti.types.ndarray(),
-    input_grad: ti.types.ndarray(),
-    n: ti.i32,
-    dx: float,
-    dt: float,
-    volume: float,
-    mass: float,
-    serial: ti.template(),
-):
-    """Last part of a step's reverse: P2G's adjoint adds its dL/dx to ``input_grad`` and
-    writes dL/dv, dL/dC and dL/d stress."""
-    B = grid_mass_grad.shape[0]
-    N = packed.shape[0] // B
+    for b, q in ti.ndrange(B, nodes):
+        update_node_adjoint(grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad,
+                            grid_momentum_grad, b, q, n, dt, ti.Vector([gx, gy, gz]),
+                            wall_kind, thickness, friction)  # fmt: skip
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p

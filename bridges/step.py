@@ -72,17 +72,17 @@ class Transfer:
         vec = ti.types.vector(3, info.dtype)
 
         def grid(element):  # copy b: row b, a flat row of n^3 nodes
-            return ti.ndarray(element, shape=(batch, n**3), needs_grad=True)
+            return ti.ndarray(element, shape=(batch, n**3))
 
         self.grid_mass, self.grid_momentum = grid(info.dtype), grid(vec)
         self.grid_velocity = grid(vec)
+        # dL/d(grid mass, momentum, velocity) of the step being reversed
+        self._grid_grads = (grid(info.dtype), grid(vec), grid(vec))
         walls = scene.walls
         friction = walls.friction if walls.kind == "separate" else 0.0
-        self._grid_settings = (n, scene.dt, *scene.gravity, _WALL_CODES[walls.kind],
-                               walls.thickness, friction)  # fmt: skip
-        self._particle_settings = (n, scene.dx, scene.dt, scene.particle_volume,
-                                   scene.particle_mass)  # fmt: skip
-        self._settings = (*self._particle_settings, *self._grid_settings[2:])
+        self._settings = (n, scene.dx, scene.dt, scene.particle_volume, scene.particle_mass,
+                          *scene.gravity, _WALL_CODES[walls.kind], walls.thickness,
+                          friction)  # fmt: skip
 
     @property
     def num_particles(self) -> int:
@@ -102,14 +102,10 @@ class Transfer:
                  output_grad: torch.Tensor) -> torch.Tensor:  # fmt: skip
         """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 33) input, its
         (B * N, 24) output and dL/d(output)."""
-        grids = self._grids()
         input_grad = packed.new_empty(packed.shape)
-        kernels.step_backward(packed, output, output_grad.contiguous(), input_grad, *grids,
-                              *(g.grad for g in grids), *self._settings,
+        kernels.step_backward(packed, output, output_grad.contiguous(), input_grad,
+                              *self._grids(), *self._grid_grads, *self._settings,
                               self._serial)  # fmt: skip
-        kernels.grid_update.grad(*grids, *self._grid_settings, self._serial)
-        kernels.p2g_backward(packed, self.grid_mass.grad, self.grid_momentum.grad, input_grad,
-                             *self._particle_settings, self._serial)  # fmt: skip
         return input_grad
 
 

@@ -45,21 +45,29 @@ def node_of(q, n):
 
 
 @ti.func
+def apply_wall(v, d: ti.template(), node, n, kind, thickness, friction):
+    """The walls ``thickness`` cells deep on the two faces normal to axis d (slip is friction
+    0): a sticky wall stops a node near it; a slip or separate one takes a node's velocity
+    into it away and slows the rest by friction."""
+    unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
+    low = node[d] < thickness
+    high = node[d] >= n - thickness
+    into_wall = ti.cast((low & (v[d] < 0)) | (high & (v[d] > 0)), float)
+    near_wall = ti.cast(low | high, float)
+    tangent = v - v[d] * unit
+    speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
+    slid = tangent * ti.max(0.0, 1.0 - friction * ti.abs(v[d]) / speed)
+    sticky = ti.cast(kind == STICKY, float)
+    return sticky * (1.0 - near_wall) * v + (1.0 - sticky) * (
+        into_wall * slid + (1.0 - into_wall) * v
+    )
+
+
+@ti.func
 def apply_walls(v, node, n, kind, thickness, friction):
-    """Box walls ``thickness`` cells deep on every face (slip is friction 0)."""
+    """Box walls ``thickness`` cells deep on every face, axis by axis (:func:`apply_wall`)."""
     for d in ti.static(range(3)):
-        unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
-        low = node[d] < thickness
-        high = node[d] >= n - thickness
-        into_wall = ti.cast((low & (v[d] < 0)) | (high & (v[d] > 0)), float)
-        near_wall = ti.cast(low | high, float)
-        tangent = v - v[d] * unit
-        speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
-        slid = tangent * ti.max(0.0, 1.0 - friction * ti.abs(v[d]) / speed)
-        sticky = ti.cast(kind == STICKY, float)
-        v = sticky * (1.0 - near_wall) * v + (1.0 - sticky) * (
-            into_wall * slid + (1.0 - into_wall) * v
-        )
+        v = apply_wall(v, d, node, n, kind, thickness, friction)
     return v
 
 

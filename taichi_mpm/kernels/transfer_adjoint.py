@@ -14,6 +14,14 @@ B-spline weights ``w_n = w(fx_0) w(fx_1) w(fx_2)``, ``fx = x / dx - base``, and 
 * P2G: ``m_n += w_n m``, ``p_n += w_n (m v + A dx o_n)`` with ``A = -dt V 4/dx^2 stress + m C``.
   With ``s = sum w_n dL/dp_n``: ``dL/dv = m s``, ``dL/dA = dx sum w_n dL/dp_n o_n^T``,
   ``dL/dx = sum_n (dL/dw_n) dw_n/dx - A^T s``.
+* Grid update of a node with mass ``m > 0``: ``u = p / max(m, floor) + dt g``, then the walls
+  along each axis d in turn. A sticky wall zeroes u near it, so passes ``(1 - near) dL/du``.
+  A slip or separate wall acts on a node moving into it: with the tangential part
+  ``t = u - u_d e_d``, ``s = sqrt(|t|^2 + tiny)`` and ``r = 1 - friction |u_d| / s``, it leaves
+  ``t max(r, 0)``, so for ``r > 0`` (else 0) ``dL/du = r h + (h . t) friction
+  (|u_d| t / s^3 - sign(u_d) / s e_d)`` with ``h = dL/du'`` off axis d. Then ``dL/dp = dL/du /
+  max(m, floor)`` and ``dL/dm = -(dL/du . p) / m^2`` (0 below the floor). An empty node
+  passes nothing.
 
 They are checked against Taichi's autodiff of the forward functions (taichi_mpm's reverse
 pass) and against finite differences in ``tests/bridges``.
@@ -22,7 +30,16 @@ pass) and against finite differences in ``tests/bridges``.
 import taichi as ti
 
 from taichi_mpm.kernels.linalg import identity, matmul_t, matvec, outer, t_matmul, t_matvec
-from taichi_mpm.kernels.transfer import STENCIL, node_index, stencil
+from taichi_mpm.kernels.transfer import (
+    MASS_FLOOR,
+    STENCIL,
+    STICKY,
+    TANGENT_TINY,
+    apply_wall,
+    node_index,
+    node_of,
+    stencil,
+)
 
 
 @ti.func
@@ -95,3 +112,56 @@ def p2g_particle_adjoint(
         affine_grad += outer(weight * momentum_grad, dpos)
     x_grad -= t_matvec(affine, weighted)
     return x_grad, particle_mass * weighted, particle_mass * affine_grad, stress_scale * affine_grad
+
+
+@ti.func
+def _wall_adjoint(u, u_grad, d: ti.template(), node, n, kind, thickness, friction):
+    """dL/du of one axis' wall step u -> u' (see the module docstring) from dL/du'."""
+    low = node[d] < thickness
+    high = node[d] >= n - thickness
+    grad = u_grad
+    if kind == STICKY:
+        if low or high:
+            grad = ti.Vector.zero(float, 3)
+    elif (low and u[d] < 0) or (high and u[d] > 0):
+        unit = ti.Vector([1.0 if e == d else 0.0 for e in ti.static(range(3))])
+        tangent = u - u[d] * unit
+        speed = ti.sqrt(tangent.dot(tangent) + TANGENT_TINY)
+        ratio = 1.0 - friction * ti.abs(u[d]) / speed
+        grad = ti.Vector.zero(float, 3)
+        if ratio > 0:
+            off_axis = u_grad - u_grad[d] * unit
+            along = off_axis.dot(tangent) * friction
+            grad = ratio * off_axis + along * (
+                (ti.abs(u[d]) / speed**3) * tangent - (ti.math.sign(u[d]) / speed) * unit
+            )
+    return grad
+
+
+@ti.func
+def update_node_adjoint(
+    grid_mass: ti.template(), grid_momentum: ti.template(), grid_velocity_grad: ti.template(),
+    grid_mass_grad: ti.template(), grid_momentum_grad: ti.template(), grid_slot, q, n, dt,
+    gravity, wall_kind, wall_thickness, wall_friction,
+):  # fmt: skip
+    """Reverse of :func:`~taichi_mpm.kernels.transfer.update_node`: writes node q's dL/d(mass)
+    and dL/d(momentum) from its dL/d(velocity)."""
+    mass = grid_mass[grid_slot, q]
+    mass_grad = 0.0
+    momentum_grad = ti.Vector.zero(float, 3)
+    if mass > 0:
+        momentum = grid_momentum[grid_slot, q]
+        floored = ti.max(mass, MASS_FLOOR)
+        node = node_of(q, n)
+        u0 = momentum / floored + dt * gravity  # the velocity before each axis' walls
+        u1 = apply_wall(u0, 0, node, n, wall_kind, wall_thickness, wall_friction)
+        u2 = apply_wall(u1, 1, node, n, wall_kind, wall_thickness, wall_friction)
+        grad = grid_velocity_grad[grid_slot, q]
+        grad = _wall_adjoint(u2, grad, 2, node, n, wall_kind, wall_thickness, wall_friction)
+        grad = _wall_adjoint(u1, grad, 1, node, n, wall_kind, wall_thickness, wall_friction)
+        grad = _wall_adjoint(u0, grad, 0, node, n, wall_kind, wall_thickness, wall_friction)
+        momentum_grad = grad / floored
+        if mass > MASS_FLOOR:
+            mass_grad = -grad.dot(momentum) / (mass * mass)
+    grid_mass_grad[grid_slot, q] = mass_grad
+    grid_momentum_grad[grid_slot, q] = momentum_grad
