@@ -1,9 +1,9 @@
-"""Batched 3x3 SVD in Taichi kernels: values from ``ti.svd`` (float32), and the backward.
+"""Batched 3x3 SVD in Taichi kernels: values by Jacobi rotations (float32), and the backward.
 
-torch runs a LAPACK call per 3x3 matrix (~1.7 us each on this CPU); ``ti.svd`` is an unrolled
-Jacobi iteration over the whole batch in one kernel (0.57 ms for 1000 matrices, 1.7 ms with
-torch). Its float32 result is as accurate as float32 allows (reconstruction ~1e-6), but its
-float64 variant only reaches ~1e-10, far from LAPACK's 1e-15, so float64 stays with torch.
+torch runs a LAPACK call per 3x3 matrix (~1.7 us each on this CPU); the kernel runs
+:func:`taichi_mpm.kernels.jacobi_svd.jacobi_svd` over the whole batch in one launch
+(``benchmarks/svd3.py``). Its float32 result is as accurate as float32 allows
+(reconstruction ~1e-6); float64 stays with torch, whose LAPACK reaches 1e-15.
 Used for the values of :func:`bridges.linalg.svd` when a float32 Taichi CPU runtime is running;
 otherwise the caller falls back to torch.
 

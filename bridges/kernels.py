@@ -20,6 +20,7 @@ autodiff instead.
 
 import taichi as ti
 
+from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 from taichi_mpm.kernels.transfer import g2p_particle, p2g_particle, update_node
 from taichi_mpm.kernels.transfer_adjoint import (
     g2p_particle_adjoint,
@@ -199,10 +200,10 @@ def svd3(F: ti.types.ndarray(), out: ti.types.ndarray(), serial: ti.template()):
     """
     ti.loop_config(serialize=serial)
     for p in range(F.shape[0]):
-        u, s, v = ti.svd(_mat(F, p, 0))
+        u, s, v = jacobi_svd(_mat(F, p, 0))
         _put_mat(out, p, 0, u)
         for i in ti.static(range(3)):
-            out[p, 9 + i] = s[i, i]
+            out[p, 9 + i] = s[i]
         _put_mat(out, p, 12, v)
 
 
