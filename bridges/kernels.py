@@ -10,6 +10,13 @@ A step may advance B independent copies of a scene at once (a batch: the segment
 teacher-forced rollout), rows ``b * N .. (b + 1) * N - 1`` of the packed tensors being copy b,
 its grid row b of the (B, n^3) grid arrays, so every copy keeps its own grid and walls.
 
+With serial loops (a CPU step below ``bridges.step.PARALLEL_MIN_PARTICLES``), grid loops visit
+only each copy's occupied box: the nodes of its particles' stencils, measured at the start of
+every launch into ``box`` (B, 6: lower corner, upper corner exclusive). A launch clears and
+writes every node of the boxes before reading any, and reads nothing outside them, so nodes
+outside keep stale values that are never used. In the paper scene a box is about a fifth of
+the grid. Parallel loops visit every node.
+
 The reverse pass is one launch, :func:`step_backward`: it redoes the step's P2G and grid update
 (the reverse reads the grid), then runs the hand-written adjoints
 (:mod:`taichi_mpm.kernels.transfer_adjoint`) of G2P, of the grid update (walls included) and
@@ -21,7 +28,13 @@ autodiff instead.
 import taichi as ti
 
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
-from taichi_mpm.kernels.transfer import g2p_particle, p2g_particle, update_node
+from taichi_mpm.kernels.transfer import (
+    g2p_particle,
+    node_index,
+    p2g_particle,
+    stencil,
+    update_node,
+)
 from taichi_mpm.kernels.transfer_adjoint import (
     g2p_particle_adjoint,
     p2g_particle_adjoint,
@@ -59,32 +72,96 @@ def _put_mat(t: ti.template(), p, offset, value):
 
 
 @ti.func
+def _measure_boxes(packed: ti.template(), box: ti.template(), n, dx):
+    """Each copy's occupied box (serial loops only): from the lowest to past the highest node
+    of its particles' 27-node stencils."""
+    B = box.shape[0]
+    N = packed.shape[0] // B
+    ti.loop_config(serialize=True)
+    for b in range(B):
+        lower = ti.Vector([n, n, n])
+        upper = ti.Vector([0, 0, 0])
+        for p in range(N):
+            base, _fx, _w = stencil(_vec(packed, b * N + p, COL_X), 1.0 / dx, n)
+            lower = ti.min(lower, base)
+            upper = ti.max(upper, base + 3)
+        for d in ti.static(range(3)):
+            box[b, d] = lower[d]
+            box[b, 3 + d] = upper[d]
+
+
+@ti.func
+def _each_node(body: ti.template(), args: ti.template(), box: ti.template(), B, nodes, n,
+               serial: ti.template()):  # fmt: skip
+    """``body(*args, b, q)`` for node q of every copy b: the nodes of the copies' boxes with
+    serial loops, every node with parallel ones."""
+    if ti.static(serial):
+        ti.loop_config(serialize=True)
+        for b in range(B):
+            for i in range(box[b, 0], box[b, 3]):
+                for j in range(box[b, 1], box[b, 4]):
+                    for k in range(box[b, 2], box[b, 5]):
+                        body(*args, b, node_index(i, j, k, n))
+    else:
+        for b, q in ti.ndrange(B, nodes):
+            body(*args, b, q)
+
+
+@ti.func
+def _clear_node(grid_mass: ti.template(), grid_momentum: ti.template(), b, q):
+    grid_mass[b, q] = 0.0
+    grid_momentum[b, q] = ti.Vector.zero(float, 3)
+
+
+@ti.func
+def _clear_velocity_grad(grid_velocity_grad: ti.template(), b, q):
+    grid_velocity_grad[b, q] = ti.Vector.zero(float, 3)
+
+
+@ti.func
+def _update_node(grid_mass: ti.template(), grid_momentum: ti.template(),
+                 grid_velocity: ti.template(), n, dt, gravity, wall_kind, thickness, friction,
+                 b, q):  # fmt: skip
+    update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt, gravity, wall_kind,
+                thickness, friction)  # fmt: skip
+
+
+@ti.func
+def _update_node_adjoint(grid_mass: ti.template(), grid_momentum: ti.template(),
+                         grid_velocity_grad: ti.template(), grid_mass_grad: ti.template(),
+                         grid_momentum_grad: ti.template(), n, dt, gravity, wall_kind,
+                         thickness, friction, b, q):  # fmt: skip
+    update_node_adjoint(grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad,
+                        grid_momentum_grad, b, q, n, dt, gravity, wall_kind, thickness,
+                        friction)  # fmt: skip
+
+
+@ti.func
 def _scatter_and_update(
     packed: ti.template(),
     grid_mass: ti.template(),
     grid_momentum: ti.template(),
     grid_velocity: ti.template(),
+    box: ti.template(),
     settings: ti.template(),
     serial: ti.template(),
 ):
-    """Clear every copy's grid, P2G of the packed input, the grid update."""
+    """Clear every copy's grid (its box), P2G of the packed input, the grid update."""
     n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
     B, nodes = grid_mass.shape[0], grid_mass.shape[1]
     N = packed.shape[0] // B
-    ti.loop_config(serialize=serial)
-    for b, q in ti.ndrange(B, nodes):
-        grid_mass[b, q] = 0.0
-        grid_momentum[b, q] = ti.Vector.zero(float, 3)
+    if ti.static(serial):
+        _measure_boxes(packed, box, n, dx)
+    _each_node(_clear_node, (grid_mass, grid_momentum), box, B, nodes, n, serial)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
         p2g_particle(_vec(packed, row, COL_X), _vec(packed, row, COL_V),
                      _mat(packed, row, COL_C), _mat(packed, row, COL_STRESS), grid_mass,
                      grid_momentum, b, n, dx, dt, volume, mass)  # fmt: skip
-    ti.loop_config(serialize=serial)
-    for b, q in ti.ndrange(B, nodes):
-        update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt,
-                    ti.Vector([gx, gy, gz]), wall_kind, thickness, friction)  # fmt: skip
+    _each_node(_update_node, (grid_mass, grid_momentum, grid_velocity, n, dt,
+                              ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
+               box, B, nodes, n, serial)  # fmt: skip
 
 
 @ti.kernel
@@ -94,6 +171,7 @@ def step_forward(
     grid_mass: ti.types.ndarray(),
     grid_momentum: ti.types.ndarray(),
     grid_velocity: ti.types.ndarray(),
+    box: ti.types.ndarray(),
     n: ti.i32,
     dx: float,
     dt: float,
@@ -108,7 +186,7 @@ def step_forward(
     serial: ti.template(),
 ):
     """One step: packed (B * N, 33) input -> packed (B * N, 24) output (x, v, C, F_trial)."""
-    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity,
+    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity, box,
                         (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
                         serial)  # fmt: skip
     B = grid_mass.shape[0]
@@ -137,6 +215,7 @@ def step_backward(
     grid_mass_grad: ti.types.ndarray(),
     grid_momentum_grad: ti.types.ndarray(),
     grid_velocity_grad: ti.types.ndarray(),
+    box: ti.types.ndarray(),
     n: ti.i32,
     dx: float,
     dt: float,
@@ -153,14 +232,12 @@ def step_backward(
     """A step's reverse: the packed (B * N, 33) ``input_grad`` (dL/d x, v, C, F, stress) from
     the (B * N, 24) ``output_grad``, given the step's (B * N, 24) ``output``. Redoes P2G and
     the grid update, then runs the adjoints of G2P, the grid update and P2G in turn."""
-    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity,
+    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity, box,
                         (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
                         serial)  # fmt: skip
     B, nodes = grid_mass.shape[0], grid_mass.shape[1]
     N = packed.shape[0] // B
-    ti.loop_config(serialize=serial)
-    for b, q in ti.ndrange(B, nodes):
-        grid_velocity_grad[b, q] = ti.Vector.zero(float, 3)
+    _each_node(_clear_velocity_grad, (grid_velocity_grad,), box, B, nodes, n, serial)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
@@ -173,11 +250,10 @@ def step_backward(
         )  # fmt: skip
         _put_vec(input_grad, row, COL_X, x_grad)
         _put_mat(input_grad, row, COL_F, F_grad)
-    ti.loop_config(serialize=serial)
-    for b, q in ti.ndrange(B, nodes):
-        update_node_adjoint(grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad,
-                            grid_momentum_grad, b, q, n, dt, ti.Vector([gx, gy, gz]),
-                            wall_kind, thickness, friction)  # fmt: skip
+    _each_node(_update_node_adjoint, (grid_mass, grid_momentum, grid_velocity_grad,
+                                      grid_mass_grad, grid_momentum_grad, n, dt,
+                                      ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
+               box, B, nodes, n, serial)  # fmt: skip
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p

@@ -78,6 +78,8 @@ class Transfer:
         self.grid_velocity = grid(vec)
         # dL/d(grid mass, momentum, velocity) of the step being reversed
         self._grid_grads = (grid(info.dtype), grid(vec), grid(vec))
+        # each copy's occupied box of grid nodes, measured by every launch (bridges.kernels)
+        self._box = ti.ndarray(ti.i32, shape=(batch, 6))
         walls = scene.walls
         friction = walls.friction if walls.kind == "separate" else 0.0
         self._settings = (n, scene.dx, scene.dt, scene.particle_volume, scene.particle_mass,
@@ -95,7 +97,8 @@ class Transfer:
     def forward(self, packed: torch.Tensor) -> torch.Tensor:
         """Packed (B * N, 24) next state (x, v, C, F_trial) from a packed (B * N, 33) input."""
         out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
-        kernels.step_forward(packed, out, *self._grids(), *self._settings, self._serial)
+        kernels.step_forward(packed, out, *self._grids(), self._box, *self._settings,
+                             self._serial)  # fmt: skip
         return out
 
     def backward(self, packed: torch.Tensor, output: torch.Tensor,
@@ -104,7 +107,7 @@ class Transfer:
         (B * N, 24) output and dL/d(output)."""
         input_grad = packed.new_empty(packed.shape)
         kernels.step_backward(packed, output, output_grad.contiguous(), input_grad,
-                              *self._grids(), *self._grid_grads, *self._settings,
+                              *self._grids(), *self._grid_grads, self._box, *self._settings,
                               self._serial)  # fmt: skip
         return input_grad
 
