@@ -11,25 +11,14 @@ gradients near the identity) it matches LU to a few units in the last place; lik
 inverse's relative error grows with the condition number.
 
 Used by :mod:`tasks.constitutive.law_graph` in place of ATen's determinant and inverse for
-(..., 3, 3) floating-point inputs.
+(..., 3, 3) floating-point inputs (:func:`bridges.linalg.real_3x3`).
 """
 
 from __future__ import annotations
 
 import torch
 
-__all__ = ["applies", "det3", "inv3"]
-
-
-def applies(A: object) -> bool:
-    """Whether the closed forms apply: a floating-point tensor of (..., 3, 3) matrices."""
-    return (
-        isinstance(A, torch.Tensor)
-        and A.dim() >= 2
-        and A.shape[-2:] == (3, 3)
-        and A.dtype.is_floating_point
-        and not A.is_complex()
-    )
+__all__ = ["det3", "inv3", "inverse_and_det"]
 
 
 def _entries(A: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -53,11 +42,17 @@ def det3(A: torch.Tensor) -> torch.Tensor:
     return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
 
 
-def inv3(A: torch.Tensor) -> torch.Tensor:
-    """Inverses of (..., 3, 3) matrices: the adjugate over the determinant (inf or nan where
-    a matrix is singular, where ``torch.linalg.inv`` raises)."""
+def inverse_and_det(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Inverses of (..., 3, 3) matrices, the adjugate over the determinant, and the
+    determinants (shape (...)) that divide them: inf or nan where a matrix is singular, where
+    ``torch.linalg.inv`` raises."""
     (a, b, c, *_), cofactors = _cofactors(A)
     det = a * cofactors[0] + b * cofactors[1] + c * cofactors[2]
     # the inverse is the transposed cofactor matrix over the determinant
     adjugate = torch.stack([cofactors[3 * col + row] for row in range(3) for col in range(3)], -1)
-    return (adjugate / det[..., None]).reshape(A.shape)
+    return (adjugate / det[..., None]).reshape(A.shape), det
+
+
+def inv3(A: torch.Tensor) -> torch.Tensor:
+    """Inverses of (..., 3, 3) matrices (:func:`inverse_and_det` without the determinants)."""
+    return inverse_and_det(A)[0]

@@ -39,7 +39,7 @@ from torch.autograd.function import once_differentiable
 
 from bridges.fast_svd import taichi_svd, taichi_svd_backward
 
-__all__ = ["polar", "stable_linalg", "svd", "trace"]
+__all__ = ["polar", "real_3x3", "stable_linalg", "svd", "trace"]
 
 _linalg_svd = torch.linalg.svd
 _torch_svd = torch.svd
@@ -155,7 +155,9 @@ def trace(A: torch.Tensor) -> torch.Tensor:
 # ------------------------------------------------------------------- routing torch's SVDs
 
 
-def _routable(A: object) -> bool:
+def real_3x3(A: object) -> bool:
+    """Whether ``A`` is a real floating-point tensor of (..., 3, 3) matrices: what the routed
+    SVDs and the closed forms of :mod:`bridges.closed_form` take."""
     return (
         isinstance(A, torch.Tensor)
         and A.dim() >= 2
@@ -165,20 +167,20 @@ def _routable(A: object) -> bool:
 
 
 def _stable_linalg_svd(A, full_matrices=True, *, driver=None, out=None):
-    if driver is not None or out is not None or not _routable(A):
+    if driver is not None or out is not None or not real_3x3(A):
         return _linalg_svd(A, full_matrices, driver=driver, out=out)
     return torch.return_types.linalg_svd(svd(A, signed=False))
 
 
 def _stable_torch_svd(input, some=True, compute_uv=True, *, out=None):
-    if not compute_uv or out is not None or not _routable(input):
+    if not compute_uv or out is not None or not real_3x3(input):
         return _torch_svd(input, some, compute_uv, out=out)
     U, S, Vh = svd(input, signed=False)
     return torch.return_types.svd((U, S, Vh.mT))
 
 
 def _stable_tensor_svd(self, some=True, compute_uv=True):
-    if not compute_uv or not _routable(self):
+    if not compute_uv or not real_3x3(self):
         return _tensor_svd(self, some, compute_uv)
     return _stable_torch_svd(self)
 

@@ -248,7 +248,7 @@ def stable_svd(
     A: torch.Tensor, full_matrices: bool = True, compute_uv: bool = True, driver: Any = None
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``aten._linalg_svd`` with :func:`bridges.linalg.svd`'s stable gradient for 3x3 inputs."""
-    if compute_uv and driver is None and A.shape[-2:] == (3, 3) and A.dtype.is_floating_point:
+    if compute_uv and driver is None and linalg.real_3x3(A):
         return linalg.svd(A, signed=False)
     return torch.ops.aten._linalg_svd.default(A, full_matrices, compute_uv, driver=driver)
 
@@ -256,7 +256,7 @@ def stable_svd(
 def closed_form_det(A: torch.Tensor) -> tuple[torch.Tensor, Any, Any]:
     """``aten._linalg_det`` by :func:`bridges.closed_form.det3` for 3x3 inputs; the LU factors
     and pivots are not computed (None), so it stands only where the graph reads neither."""
-    if not closed_form.applies(A):
+    if not linalg.real_3x3(A):
         return torch.ops.aten._linalg_det.default(A)
     return closed_form.det3(A), None, None
 
@@ -266,10 +266,10 @@ def closed_form_inverse(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``aten.linalg_inv_ex`` by :func:`bridges.closed_form.inv3` for 3x3 inputs; ``info`` is
     1 for an exactly singular matrix, as LU reports a zero pivot."""
-    if check_errors or not closed_form.applies(A):
+    if check_errors or not linalg.real_3x3(A):
         return torch.ops.aten.linalg_inv_ex.default(A, check_errors=check_errors)
-    info = (closed_form.det3(A.detach()) == 0).to(torch.int32)
-    return closed_form.inv3(A), info
+    inverse, det = closed_form.inverse_and_det(A)
+    return inverse, (det.detach() == 0).to(torch.int32)
 
 
 def _literal(kind: str, payload: str, dtype: torch.dtype) -> Any:
