@@ -91,20 +91,20 @@ def _measure_boxes(packed: ti.template(), box: ti.template(), n, dx):
 
 
 @ti.func
-def _each_node(body: ti.template(), args: ti.template(), box: ti.template(), B, nodes, n,
-               serial: ti.template()):  # fmt: skip
-    """``body(*args, b, q)`` for node q of every copy b: the nodes of the copies' boxes with
-    serial loops, every node with parallel ones."""
+def _each_node(body: ti.template(), before: ti.template(), after: ti.template(),
+               box: ti.template(), B, nodes, n, serial: ti.template()):  # fmt: skip
+    """``body(*before, b, q, *after)`` for node q of every copy b: the nodes of the copies'
+    boxes with serial loops, every node with parallel ones."""
     if ti.static(serial):
         ti.loop_config(serialize=True)
         for b in range(B):
             for i in range(box[b, 0], box[b, 3]):
                 for j in range(box[b, 1], box[b, 4]):
                     for k in range(box[b, 2], box[b, 5]):
-                        body(*args, b, node_index(i, j, k, n))
+                        body(*before, b, node_index(i, j, k, n), *after)
     else:
         for b, q in ti.ndrange(B, nodes):
-            body(*args, b, q)
+            body(*before, b, q, *after)
 
 
 @ti.func
@@ -116,24 +116,6 @@ def _clear_node(grid_mass: ti.template(), grid_momentum: ti.template(), b, q):
 @ti.func
 def _clear_velocity_grad(grid_velocity_grad: ti.template(), b, q):
     grid_velocity_grad[b, q] = ti.Vector.zero(float, 3)
-
-
-@ti.func
-def _update_node(grid_mass: ti.template(), grid_momentum: ti.template(),
-                 grid_velocity: ti.template(), n, dt, gravity, wall_kind, thickness, friction,
-                 b, q):  # fmt: skip
-    update_node(grid_mass, grid_momentum, b, q, n, grid_velocity, dt, gravity, wall_kind,
-                thickness, friction)  # fmt: skip
-
-
-@ti.func
-def _update_node_adjoint(grid_mass: ti.template(), grid_momentum: ti.template(),
-                         grid_velocity_grad: ti.template(), grid_mass_grad: ti.template(),
-                         grid_momentum_grad: ti.template(), n, dt, gravity, wall_kind,
-                         thickness, friction, b, q):  # fmt: skip
-    update_node_adjoint(grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad,
-                        grid_momentum_grad, b, q, n, dt, gravity, wall_kind, thickness,
-                        friction)  # fmt: skip
 
 
 @ti.func
@@ -152,15 +134,15 @@ def _scatter_and_update(
     N = packed.shape[0] // B
     if ti.static(serial):
         _measure_boxes(packed, box, n, dx)
-    _each_node(_clear_node, (grid_mass, grid_momentum), box, B, nodes, n, serial)
+    _each_node(_clear_node, (grid_mass, grid_momentum), (), box, B, nodes, n, serial)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
         p2g_particle(_vec(packed, row, COL_X), _vec(packed, row, COL_V),
                      _mat(packed, row, COL_C), _mat(packed, row, COL_STRESS), grid_mass,
                      grid_momentum, b, n, dx, dt, volume, mass)  # fmt: skip
-    _each_node(_update_node, (grid_mass, grid_momentum, grid_velocity, n, dt,
-                              ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
+    _each_node(update_node, (grid_mass, grid_momentum),
+               (n, grid_velocity, dt, ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
                box, B, nodes, n, serial)  # fmt: skip
 
 
@@ -237,7 +219,7 @@ def step_backward(
                         serial)  # fmt: skip
     B, nodes = grid_mass.shape[0], grid_mass.shape[1]
     N = packed.shape[0] // B
-    _each_node(_clear_velocity_grad, (grid_velocity_grad,), box, B, nodes, n, serial)
+    _each_node(_clear_velocity_grad, (grid_velocity_grad,), (), box, B, nodes, n, serial)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
@@ -250,9 +232,9 @@ def step_backward(
         )  # fmt: skip
         _put_vec(input_grad, row, COL_X, x_grad)
         _put_mat(input_grad, row, COL_F, F_grad)
-    _each_node(_update_node_adjoint, (grid_mass, grid_momentum, grid_velocity_grad,
-                                      grid_mass_grad, grid_momentum_grad, n, dt,
-                                      ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
+    _each_node(update_node_adjoint,
+               (grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad, grid_momentum_grad),
+               (n, dt, ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
                box, B, nodes, n, serial)  # fmt: skip
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
