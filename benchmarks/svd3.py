@@ -1,9 +1,10 @@
 """Milliseconds of a batched 3x3 SVD: the bridge's Jacobi kernel against Taichi's ``ti.svd``.
 
 Both run over the same (B, 9) float32 batch of deformation gradients near the identity in one
-serial Taichi kernel (the bridge's loops are serial below ``PARALLEL_MIN_PARTICLES``), with
-the same reads and writes; the table gives the median over ``--repeats`` launches of each,
-interleaved, and the accuracy of each against LAPACK in float64. Usage::
+serial Taichi kernel (the bridge's loops are serial below ``PARALLEL_MIN_PARTICLES``): the
+bridge's own ``svd3``, and the same kernel with ``ti.svd`` in place of the Jacobi SVD; the
+table gives the median over ``--repeats`` launches of each, interleaved, and the accuracy of
+each against LAPACK in float64. Usage::
 
     python benchmarks/svd3.py [--batch 5000] [--repeats 50]
 """
@@ -17,37 +18,19 @@ import taichi as ti
 import torch
 
 import taichi_mpm as tm
-from taichi_mpm.kernels.jacobi_svd import jacobi_svd
-
-
-@ti.func
-def _store(out: ti.template(), p, U, s, V):
-    for i, j in ti.static(ti.ndrange(3, 3)):
-        out[p, 3 * i + j] = U[i, j]
-        out[p, 12 + 3 * i + j] = V[i, j]
-    for i in ti.static(range(3)):
-        out[p, 9 + i] = s[i]
-
-
-@ti.func
-def _load(F: ti.template(), p):
-    return ti.Matrix([[F[p, 3 * i + j] for j in ti.static(range(3))] for i in ti.static(range(3))])
-
-
-@ti.kernel
-def jacobi(F: ti.types.ndarray(), out: ti.types.ndarray()):
-    ti.loop_config(serialize=True)
-    for p in range(F.shape[0]):
-        U, s, V = jacobi_svd(_load(F, p))
-        _store(out, p, U, s, V)
+from bridges.kernels import _mat, _put_mat, svd3
 
 
 @ti.kernel
 def taichi_own(F: ti.types.ndarray(), out: ti.types.ndarray()):
+    """``bridges.kernels.svd3`` (serial) with ``ti.svd``."""
     ti.loop_config(serialize=True)
     for p in range(F.shape[0]):
-        U, s, V = ti.svd(_load(F, p))
-        _store(out, p, U, ti.Vector([s[0, 0], s[1, 1], s[2, 2]]), V)
+        u, s, v = ti.svd(_mat(F, p, 0))
+        _put_mat(out, p, 0, u)
+        for i in ti.static(range(3)):
+            out[p, 9 + i] = s[i, i]
+        _put_mat(out, p, 12, v)
 
 
 def accuracy(out: torch.Tensor, F: torch.Tensor) -> tuple[float, float]:
@@ -68,7 +51,10 @@ def main() -> None:
     generator = torch.Generator().manual_seed(0)
     F = torch.eye(3) + 0.1 * torch.randn(args.batch, 3, 3, generator=generator)
     F = F.reshape(-1, 9).contiguous()
-    kernels = {"Jacobi (bridge)": jacobi, "ti.svd": taichi_own}
+    kernels = {
+        "Jacobi (bridge)": lambda matrices, out: svd3(matrices, out, True),
+        "ti.svd": taichi_own,
+    }
     outputs = {name: torch.empty(args.batch, 21) for name in kernels}
     for name, kernel in kernels.items():
         kernel(F, outputs[name])  # compile

@@ -67,12 +67,18 @@ print(json.dumps(errors))
 """
 
 
-@pytest.mark.slow
-def test_taichi_svd_in_float32():
+@pytest.fixture(scope="module")
+def measured() -> list[str]:
+    """The script's two JSON lines (its float32 Taichi process runs once for both tests)."""
     out = subprocess.run(
         [sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True
     )
-    result = json.loads(out.stdout.strip().splitlines()[-2])
+    return out.stdout.strip().splitlines()[-2:]
+
+
+@pytest.mark.slow
+def test_taichi_svd_in_float32(measured):
+    result = json.loads(measured[0])
     assert result["before"] and result["float64"]
     assert result["reconstruction"] < 1e-5
     assert result["rotations"] < 1e-5
@@ -83,11 +89,8 @@ def test_taichi_svd_in_float32():
 
 
 @pytest.mark.slow
-def test_taichi_svd_on_every_kind_of_matrix():
-    out = subprocess.run(
-        [sys.executable, "-c", SCRIPT], check=True, capture_output=True, text=True
-    )
-    families = json.loads(out.stdout.strip().splitlines()[-1])
+def test_taichi_svd_on_every_kind_of_matrix(measured):
+    families = json.loads(measured[1])
     assert len(families) == 8
     for name, errors in families.items():
         assert errors["reconstruction"] < 2e-5, name  # relative to the largest singular value
