@@ -10,10 +10,13 @@ the original (github.com/PingchuanMa/SGA, Warp + torch) runs through
 ``--rounds`` rounds, each run in a fresh process (so its peak memory is its own), and the
 table gives the minimum, median and maximum epoch over all rounds, the ratio of the medians,
 the peak resident memory and the load average around the run. Without ``--original`` only our
-own numbers are printed. Usage::
+own numbers are printed. ``--baseline`` adds another checkout of this project (a worktree of an
+earlier commit) to the rotation, run the same way, with its ratio to ours. The original's driver
+covers elastic and plasticine; our own runs cover every constitutive task. Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
-        [--original ~/SGA --original-python ~/orig-venv/bin/python] [--profile]
+        [--original ~/SGA --original-python ~/orig-venv/bin/python] [--baseline ../before]
+        [--profile]
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from make_ground_truth import TWICE_OFF, truth_code  # noqa: E402
 from sga_agent.sandbox import threads_per_worker  # noqa: E402
 
 ORIGINAL_DRIVER = Path(__file__).resolve().parent / "original_sga.py"
+ORIGINAL_TASKS = ("elastic", "plasticine")  # what the original's driver runs
 
 
 def law_code(task: str) -> str:
@@ -110,16 +114,19 @@ def _resident_mb() -> float:
 
 
 def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
-             graph_memory_mb: float | None) -> dict:  # fmt: skip
-    """Our evaluation of ``task`` in a fresh process with ``threads`` threads."""
-    command = [sys.executable, __file__, "--child", task, "--epochs", str(epochs),
-               "--graph", str(graph)]  # fmt: skip
+             graph_memory_mb: float | None, tree: Path = ROOT) -> dict:  # fmt: skip
+    """Our evaluation of ``task`` in a fresh process with ``threads`` threads, by the code of
+    checkout ``tree`` (this one by default)."""
+    command = [sys.executable, str(tree / "benchmarks" / "evaluate_speed.py"), "--child", task,
+               "--epochs", str(epochs), "--graph", str(graph)]  # fmt: skip
     if graph_memory_mb is not None:
         command += ["--graph-memory-mb", str(graph_memory_mb)]
     if profile:
         command.append("--profile")
-    env = os.environ | {"OMP_NUM_THREADS": str(threads), "TI_CPU_MAX_NUM_THREADS": str(threads)}
-    out = subprocess.run(command, capture_output=True, text=True, check=True, env=env)
+    path = os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")])
+    env = os.environ | {"OMP_NUM_THREADS": str(threads), "TI_CPU_MAX_NUM_THREADS": str(threads),
+                        "PYTHONPATH": path}  # fmt: skip
+    out = subprocess.run(command, capture_output=True, text=True, check=True, env=env, cwd=tree)
     if profile:
         print(out.stderr)
     row = json.loads(out.stdout.strip().splitlines()[-1])
@@ -159,14 +166,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--epochs", type=int, default=3, help="timed epochs per run")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds per task")
-    parser.add_argument("--tasks", nargs="+", default=["elastic", "plasticine"],
-                        choices=["elastic", "plasticine"])  # fmt: skip
+    parser.add_argument("--tasks", nargs="+", default=list(ORIGINAL_TASKS),
+                        choices=list(TWICE_OFF))  # fmt: skip
     parser.add_argument("--original", type=Path, help="a checkout of github.com/PingchuanMa/SGA")
     parser.add_argument("--original-python", type=Path, default=Path(sys.executable),
                         help="a Python with warp-lang 1.1.0, torch and numpy < 2")  # fmt: skip
     parser.add_argument("--original-data", type=Path,
                         default=Path.home() / ".cache" / "sga-benchmarks" / "original",
                         help="where the original's ground truth is written once")  # fmt: skip
+    parser.add_argument("--baseline", type=Path,
+                        help="another checkout of this project, timed beside ours")  # fmt: skip
     parser.add_argument("--profile", action="store_true", help="cProfile of our evaluation")
     parser.add_argument("--threads", type=int, default=threads_per_worker(1),
                         help="our threads (torch and Taichi); default: what sga-agent evaluate "
@@ -181,19 +190,24 @@ def main() -> None:
         print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph, options)))
         return
     if args.original:
+        if set(args.tasks) - set(ORIGINAL_TASKS):
+            parser.error(f"--original covers only {', '.join(ORIGINAL_TASKS)}")
         prepare_original(args)
+    trees = {"ours": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     folder = Path(tempfile.mkdtemp(prefix="evaluate-speed-"))
     graphs = {task: capture(task, folder) for task in args.tasks}
     for task in args.tasks:  # fills Taichi's kernel cache and the ground truth: no round compiles
-        run_ours(task, 1, False, args.threads, graphs[task], args.graph_memory_mb)
+        for tree in trees.values():
+            run_ours(task, 1, False, args.threads, graphs[task], args.graph_memory_mb, tree)
     load_before = os.getloadavg()
     started = time.perf_counter()
     runs: dict[tuple[str, str], list[dict]] = {}
     for round_index in range(args.rounds):
         for task in args.tasks:
-            ours = run_ours(task, args.epochs, args.profile, args.threads, graphs[task],
-                            args.graph_memory_mb)  # fmt: skip
-            runs.setdefault(("ours", task), []).append(ours)
+            for impl, tree in trees.items():
+                run = run_ours(task, args.epochs, args.profile, args.threads, graphs[task],
+                               args.graph_memory_mb, tree)  # fmt: skip
+                runs.setdefault((impl, task), []).append(run)
             if args.original:
                 runs.setdefault(("original", task), []).append(
                     run_original(task, args.epochs, args)
@@ -206,19 +220,20 @@ def main() -> None:
           f"{args.rounds} rounds x {args.epochs} epochs; ours on {args.threads} thread(s), "
           "the original on 1")  # fmt: skip
     print(f"{'task':<11} {'impl':<9} {'s/epoch min / median / max':>27} {'peak MB':>8} "
-          f"{'speed-up (medians)':>19}")  # fmt: skip
+          f"{'ours faster (medians)':>22}")  # fmt: skip
     for task in args.tasks:
         medians = {}
-        for impl in ("original", "ours"):
+        for impl in ("original", "baseline", "ours"):
             if (impl, task) not in runs:
                 continue
             epochs = [s for run in runs[impl, task] for s in run["epoch_s"]]
             peak = max(run["peak_mb"] for run in runs[impl, task])
             medians[impl] = statistics.median(epochs)
-            ratio = ""
-            if impl == "ours" and "original" in medians:
-                ratio = f"{medians['original'] / medians['ours']:.2f}x"
-            print(f"{task:<11} {impl:<9} {spread(epochs):>27} {peak:8.0f} {ratio:>19}")
+            print(f"{task:<11} {impl:<9} {spread(epochs):>27} {peak:8.0f}")
+        for impl in ("original", "baseline"):
+            if impl in medians:
+                print(f"{task:<11} {'':<9} {'':>27} {'':>8} "
+                      f"{medians[impl] / medians['ours']:>10.2f}x vs {impl}")  # fmt: skip
 
 
 if __name__ == "__main__":

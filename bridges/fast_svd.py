@@ -21,7 +21,7 @@ from taichi_mpm import runtime
 _PRECISIONS = {torch.float32: "float32", torch.float64: "float64"}
 
 
-def _runs_in_taichi(tensor: torch.Tensor, precisions: tuple[str, ...]) -> bool:
+def runs_in_taichi(tensor: torch.Tensor, precisions: tuple[str, ...]) -> bool:
     """A non-empty CPU batch of 3x3 matrices, in a precision of ``precisions`` that a Taichi CPU
     runtime runs in."""
     if tensor.device.type != "cpu" or tensor.ndim < 2 or tensor.shape[-2:] != (3, 3):
@@ -41,7 +41,7 @@ def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
     None unless ``F`` is a non-empty float32 batch of 3x3 matrices on the CPU and a float32
     Taichi CPU runtime is running. Singular values come sorted by decreasing magnitude.
     """
-    if not _runs_in_taichi(F, ("float32",)):
+    if not runs_in_taichi(F, ("float32",)):
         return None
     from bridges import kernels  # compiles on first use only
 
@@ -63,7 +63,7 @@ def taichi_svd_backward(
 ) -> torch.Tensor | None:
     """dL/dF of ``F = U diag(S) Vh`` from ``grads`` = (dL/dU, dL/dS, dL/dVh), any of them None
     (zero), with the clamp of :mod:`bridges.linalg`; None where Taichi does not apply."""
-    if not _runs_in_taichi(U, ("float32", "float64")):
+    if not runs_in_taichi(U, ("float32", "float64")):
         return None
     from bridges import kernels
 

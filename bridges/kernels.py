@@ -27,6 +27,7 @@ autodiff instead.
 
 import taichi as ti
 
+from taichi_mpm.kernels.constitutive import J_FLOOR, SIGMA_FLOOR
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 from taichi_mpm.kernels.transfer import (
     g2p_particle,
@@ -270,6 +271,27 @@ def _clamp_magnitude(x, tol):
     return ti.max(x, tol) if x >= 0 else ti.min(x, -tol)
 
 
+@ti.func
+def _svd_adjoint(u, s, vh, u_grad, s_grad, vh_grad, tol_factor):
+    """dL/dF of F = U diag(s) Vh from dL/dU, dL/ds, dL/dVh: the clamped formula of
+    :mod:`bridges.linalg`, ``U (sym(a + b) / (s_j - s_i) + (a - b) / (s_j + s_i)) / 2 +
+    diag(dL/ds)) Vh``, each denominator's magnitude at least
+    ``tol_factor * max(1, max_k |s_k|)``."""
+    a = u.transpose() @ u_grad
+    b = vh @ vh_grad.transpose()
+    a, b = a - a.transpose(), b - b.transpose()
+    tol = tol_factor * ti.max(1.0, ti.max(ti.abs(s[0]), ti.abs(s[1]), ti.abs(s[2])))
+    inner = ti.Matrix.zero(float, 3, 3)
+    for i, j in ti.static(ti.ndrange(3, 3)):
+        if ti.static(i == j):
+            inner[i, j] = s_grad[i]
+        else:
+            gap = _clamp_magnitude(s[j] - s[i], tol)
+            total = _clamp_magnitude(s[j] + s[i], tol)
+            inner[i, j] = 0.5 * ((a[i, j] + b[i, j]) / gap + (a[i, j] - b[i, j]) / total)
+    return u @ inner @ vh
+
+
 @ti.kernel
 def svd3_backward(
     U: ti.types.ndarray(),
@@ -282,26 +304,115 @@ def svd3_backward(
     tol_factor: float,
     serial: ti.template(),
 ):
-    """dL/dF of F = U diag(S) Vh from dL/dU, dL/dS, dL/dVh, rows of (B, 9) / (B, 3) arrays.
-
-    The clamped formula of :mod:`bridges.linalg` in one pass per matrix:
-    ``U (sym(a + b) / (s_j - s_i) + (a - b) / (s_j + s_i)) / 2 + diag(dL/dS)) Vh``, each
-    denominator's magnitude at least ``tol_factor * max(1, max_k |s_k|)``.
-    """
+    """dL/dF of F = U diag(S) Vh from dL/dU, dL/dS, dL/dVh, rows of (B, 9) / (B, 3) arrays,
+    by :func:`_svd_adjoint`."""
     ti.loop_config(serialize=serial)
     for p in range(U.shape[0]):
-        u, vh = _mat(U, p, 0), _mat(Vh, p, 0)
         s = ti.Vector([S[p, 0], S[p, 1], S[p, 2]], dt=float)
-        a = u.transpose() @ _mat(U_grad, p, 0)
-        b = vh @ _mat(Vh_grad, p, 0).transpose()
-        a, b = a - a.transpose(), b - b.transpose()
-        tol = tol_factor * ti.max(1.0, ti.max(ti.abs(s[0]), ti.abs(s[1]), ti.abs(s[2])))
-        inner = ti.Matrix.zero(float, 3, 3)
-        for i, j in ti.static(ti.ndrange(3, 3)):
-            if ti.static(i == j):
-                inner[i, j] = S_grad[p, i]
-            else:
-                gap = _clamp_magnitude(s[j] - s[i], tol)
-                total = _clamp_magnitude(s[j] + s[i], tol)
-                inner[i, j] = 0.5 * ((a[i, j] + b[i, j]) / gap + (a[i, j] - b[i, j]) / total)
-        _put_mat(F_grad, p, 0, u @ inner @ vh)
+        s_grad = ti.Vector([S_grad[p, 0], S_grad[p, 1], S_grad[p, 2]], dt=float)
+        F_grad_p = _svd_adjoint(_mat(U, p, 0), s, _mat(Vh, p, 0), _mat(U_grad, p, 0), s_grad,
+                                _mat(Vh_grad, p, 0), tol_factor)  # fmt: skip
+        _put_mat(F_grad, p, 0, F_grad_p)
+
+
+@ti.func
+def _factors(F: ti.template(), factors: ti.template(), p, decompose: ti.template()):
+    """Row p's signed SVD (U, s, V): computed and stored in ``factors`` (U, s, V: 21 columns)
+    when ``decompose``, else read from it."""
+    u, s, v = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3)
+    if ti.static(decompose):
+        u, s, v = jacobi_svd(_mat(F, p, 0))
+        _put_mat(factors, p, 0, u)
+        for i in ti.static(range(3)):
+            factors[p, 9 + i] = s[i]
+        _put_mat(factors, p, 12, v)
+    else:
+        u, v = _mat(factors, p, 0), _mat(factors, p, 12)
+        s = ti.Vector([factors[p, 9], factors[p, 10], factors[p, 11]], dt=float)
+    return u, s, v
+
+
+@ti.func
+def _diag(d):
+    return ti.Matrix([[d[i] if i == j else 0.0 for j in ti.static(range(3))]
+                      for i in ti.static(range(3))])  # fmt: skip
+
+
+@ti.func
+def _hencky_terms(s, mu, lam):
+    """Per singular value: the Hencky strain eps (its floored |s|), the principal Kirchhoff
+    stress t, the divisor ``safe`` (s pushed to magnitude J_FLOOR) and g = t / safe."""
+    clamped = ti.max(ti.abs(s), SIGMA_FLOOR)
+    eps = ti.log(clamped)
+    t = 2.0 * mu * eps + lam * (eps[0] + eps[1] + eps[2])
+    safe = ti.Vector([ti.max(s[i], J_FLOOR) if s[i] >= 0 else ti.min(s[i], -J_FLOOR)
+                      for i in ti.static(range(3))])  # fmt: skip
+    return clamped, eps, t, safe, t / safe
+
+
+@ti.kernel
+def hencky_forward(
+    F: ti.types.ndarray(),
+    factors: ti.types.ndarray(),
+    stress: ti.types.ndarray(),
+    mu: float,
+    lam: float,
+    decompose: ti.template(),
+    serial: ti.template(),
+):
+    """StVK-Hencky Kirchhoff stress ``tau = U diag(g) V^T F^T`` of (B, 9) rows F, as
+    ``bridges.laws.StVKHencky`` computes it; the SVD (U, s, V) in the (B, 21) ``factors``
+    (computed when ``decompose``, else given)."""
+    ti.loop_config(serialize=serial)
+    for p in range(F.shape[0]):
+        u, s, v = _factors(F, factors, p, decompose)
+        _clamped, _eps, _t, _safe, g = _hencky_terms(s, mu, lam)
+        piola = u @ _diag(g) @ v.transpose()
+        _put_mat(stress, p, 0, piola @ _mat(F, p, 0).transpose())
+
+
+@ti.kernel
+def hencky_backward(
+    F: ti.types.ndarray(),
+    factors: ti.types.ndarray(),
+    stress_grad: ti.types.ndarray(),
+    F_grad: ti.types.ndarray(),
+    lame_grad: ti.types.ndarray(),
+    mu: float,
+    lam: float,
+    tol_factor: float,
+    serial: ti.template(),
+):
+    """Reverse of :func:`hencky_forward`: (B, 9) dL/dF and each row's (dL/dmu, dL/dlam) in
+    (B, 2) ``lame_grad``, from the (B, 9) dL/d tau. The chain rule of the torch law step by
+    step: tau = M F^T, M = U diag(g) Vh, g = t / safe, t = 2 mu eps + lam tr(eps), eps =
+    log(max(|s|, SIGMA_FLOOR)), and the SVD by :func:`_svd_adjoint`."""
+    ti.loop_config(serialize=serial)
+    for p in range(F.shape[0]):
+        f, u, v = _mat(F, p, 0), _mat(factors, p, 0), _mat(factors, p, 12)
+        s = ti.Vector([factors[p, 9], factors[p, 10], factors[p, 11]], dt=float)
+        clamped, eps, t, safe, g = _hencky_terms(s, mu, lam)
+        vh = v.transpose()
+        piola = u @ _diag(g) @ vh
+        tau_grad = _mat(stress_grad, p, 0)
+        piola_grad = tau_grad @ f
+        f_grad = tau_grad.transpose() @ piola
+        ut_piola_grad = u.transpose() @ piola_grad
+        g_grad = ti.Vector([(ut_piola_grad @ v)[i, i] for i in ti.static(range(3))])
+        u_grad = piola_grad @ v @ _diag(g)
+        vh_grad = _diag(g) @ ut_piola_grad
+        t_grad = g_grad / safe
+        safe_grad = -g_grad * t / (safe * safe)
+        t_sum = t_grad[0] + t_grad[1] + t_grad[2]
+        eps_grad = 2.0 * mu * t_grad + lam * t_sum
+        s_grad = ti.Vector.zero(float, 3)
+        for i in ti.static(range(3)):
+            passes = s[i] >= J_FLOOR if s[i] >= 0 else s[i] <= -J_FLOOR
+            if passes:
+                s_grad[i] += safe_grad[i]
+            if ti.abs(s[i]) >= SIGMA_FLOOR:
+                s_grad[i] += eps_grad[i] / clamped[i] * ti.math.sign(s[i])
+        f_grad += _svd_adjoint(u, s, vh, u_grad, s_grad, vh_grad, tol_factor)
+        _put_mat(F_grad, p, 0, f_grad)
+        lame_grad[p, 0] = 2.0 * (eps[0] * t_grad[0] + eps[1] * t_grad[1] + eps[2] * t_grad[2])
+        lame_grad[p, 1] = (eps[0] + eps[1] + eps[2]) * t_sum

@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 import taichi_mpm
+from bridges.hencky import hencky_stress
 from bridges.linalg import svd, trace
 from taichi_mpm.kernels.constitutive import J_FLOOR, NORM_TINY, SAND_SIGMA_FLOOR, SIGMA_FLOOR
 
@@ -125,13 +126,20 @@ class StVKHencky(_Elastic):
 
     def forward(self, F: torch.Tensor) -> torch.Tensor:
         mu, lam = _lame(self)
-        U, sigma, Vh = svd(F)
-        eps = _log_strain(sigma, SIGMA_FLOOR)
-        tau = 2.0 * mu * eps + lam * eps.sum(-1, keepdim=True)
-        safe = torch.where(
-            sigma >= 0, torch.clamp(sigma, min=J_FLOOR), torch.clamp(sigma, max=-J_FLOOR)
-        )
-        return _from_singular_values(U, tau / safe, Vh) @ F.mT
+        fused = hencky_stress(F, mu, lam)  # the same formula in Taichi, where it runs
+        return fused if fused is not None else hencky_stress_in_torch(F, mu, lam)
+
+
+def hencky_stress_in_torch(F: torch.Tensor, mu: torch.Tensor, lam: torch.Tensor) -> torch.Tensor:
+    """:class:`StVKHencky`'s stress in torch operations: its path where Taichi does not run,
+    and the reference of :func:`bridges.hencky.hencky_stress`."""
+    U, sigma, Vh = svd(F)
+    eps = _log_strain(sigma, SIGMA_FLOOR)
+    tau = 2.0 * mu * eps + lam * eps.sum(-1, keepdim=True)
+    safe = torch.where(
+        sigma >= 0, torch.clamp(sigma, min=J_FLOOR), torch.clamp(sigma, max=-J_FLOOR)
+    )
+    return _from_singular_values(U, tau / safe, Vh) @ F.mT
 
 
 # ------------------------------------------------------------------------------- plastic
