@@ -1,7 +1,8 @@
 """SVD of one 3x3 matrix by Jacobi rotations: faster than ``ti.svd`` and as accurate in float32.
 
-``A^T A`` is diagonalised by four cyclic sweeps of Jacobi rotations (twelve rotations, each
-zeroing one off-diagonal entry exactly, accumulated into V). The columns of ``B = A V`` are
+``A^T A`` is diagonalised by up to four cyclic sweeps of Jacobi rotations (three rotations a
+sweep, each zeroing one off-diagonal entry exactly, accumulated into V), stopping once the
+off-diagonal entries are below float32 round-off of the diagonal (``CONVERGED``). The columns of ``B = A V`` are
 then orthogonal; sorted by decreasing norm, their Gram-Schmidt orthonormalisation gives U with
 ``B = U R``, R upper triangular with negligible off-diagonal, so ``A = U diag(R) V^T``. The
 third column of U is the cross product of the first two, so det U = +1; column swaps negate
@@ -17,9 +18,12 @@ singular value only when it is tiny next to the largest (ill-conditioned A). Che
 
 import taichi as ti
 
-#: Cyclic sweeps over the three off-diagonal pairs: three already reach float32 round-off
-#: near the identity, four also for general matrices.
+#: Cyclic sweeps over the three off-diagonal pairs at most: three already reach float32
+#: round-off near the identity, four also for general matrices.
 SWEEPS = 4
+#: Squared off-diagonal norm of A^T A, relative to its squared diagonal, below which no further
+#: sweep runs (1e-8 relative: under float32 round-off).
+CONVERGED = 1e-16
 _TINY = 1e-30
 
 
@@ -71,7 +75,10 @@ def jacobi_svd(A):
     negative when det A < 0."""
     S = A.transpose() @ A
     V = ti.Matrix.identity(float, 3)
-    for _ in ti.static(range(SWEEPS)):
+    diagonal = S[0, 0] * S[0, 0] + S[1, 1] * S[1, 1] + S[2, 2] * S[2, 2]
+    for _ in range(SWEEPS):
+        if S[0, 1] * S[0, 1] + S[0, 2] * S[0, 2] + S[1, 2] * S[1, 2] <= CONVERGED * diagonal:
+            break
         S, V = _rotate(S, V, 0, 1)
         S, V = _rotate(S, V, 0, 2)
         S, V = _rotate(S, V, 1, 2)
