@@ -2,12 +2,12 @@
 
 ``A^T A`` is diagonalised by up to four cyclic sweeps of Jacobi rotations (three rotations a
 sweep, each zeroing one off-diagonal entry exactly, accumulated into V), stopping once the
-off-diagonal entries are below float32 round-off of the diagonal (``CONVERGED``). The columns of ``B = A V`` are
-then orthogonal; sorted by decreasing norm, their Gram-Schmidt orthonormalisation gives U with
-``B = U R``, R upper triangular with negligible off-diagonal, so ``A = U diag(R) V^T``. The
-third column of U is the cross product of the first two, so det U = +1; column swaps negate
-one column, so det V stays +1; the sign of det A lands on the last singular value (the MPM
-convention of ``ti.svd``).
+off-diagonal entries are below float32 round-off of the diagonal (``CONVERGED``). The columns
+of ``B = A V`` are then orthogonal; sorted by decreasing norm, their Gram-Schmidt
+orthonormalisation gives U with ``B = U R``, R upper triangular with negligible off-diagonal,
+so ``A = U diag(R) V^T``. The third column of U is the cross product of the first two, so
+det U = +1; column swaps negate one column, so det V stays +1; the sign of det A lands on the
+last singular value (the MPM convention of ``ti.svd``).
 
 Accuracy (float32, against LAPACK in float64): reconstruction and orthogonality ~1e-6 for
 deformation gradients near the identity, general and rank-deficient matrices and repeated
