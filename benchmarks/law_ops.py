@@ -1,4 +1,7 @@
-"""Microseconds of a law's 3x3 determinant and inverse: torch's LU against the closed forms.
+"""Microseconds of a law's 3x3 determinant, inverse and product: torch against ours.
+
+Determinant and inverse: torch's LU against the closed forms (``bridges.closed_form``); the
+batched product ``F @ F.mT``: ``torch.bmm`` against the Taichi kernel (``bridges.products``).
 
 A teacher-forced epoch evaluates the law on one batch of 10 scene copies (10,000 particles)
 100 times, forward and backward, so these are per-step costs. Each operation runs on a
@@ -19,11 +22,14 @@ from collections.abc import Callable
 
 import torch
 
+import taichi_mpm as tm
 from bridges.closed_form import det3, inv3
+from bridges.products import bmm3
 
 OPERATIONS: dict[str, dict[str, Callable[[torch.Tensor], torch.Tensor]]] = {
     "determinant": {"torch (LU)": torch.linalg.det, "closed form": det3},
     "inverse": {"torch (LU)": torch.linalg.inv, "closed form": inv3},
+    "product": {"torch (bmm)": lambda F: F @ F.mT, "Taichi": lambda F: bmm3(F, F.mT)},
 }
 
 
@@ -43,6 +49,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    tm.init(arch="cpu", precision=args.dtype, cpu_max_num_threads=args.threads)
     generator = torch.Generator().manual_seed(0)
     dtype = getattr(torch, args.dtype)
     noise = torch.randn(args.batch, 3, 3, generator=generator, dtype=dtype)

@@ -416,3 +416,37 @@ def hencky_backward(
         _put_mat(F_grad, p, 0, f_grad)
         lame_grad[p, 0] = 2.0 * (eps[0] * t_grad[0] + eps[1] * t_grad[1] + eps[2] * t_grad[2])
         lame_grad[p, 1] = (eps[0] + eps[1] + eps[2]) * t_sum
+
+
+@ti.func
+def _operand(t: ti.template(), p, transposed: ti.template()):
+    m = _mat(t, p, 0)
+    if ti.static(transposed):
+        m = m.transpose()
+    return m
+
+
+@ti.kernel
+def product3(A: ti.types.ndarray(), B: ti.types.ndarray(), C: ti.types.ndarray(),
+             transpose_a: ti.template(), transpose_b: ti.template(),
+             serial: ti.template()):  # fmt: skip
+    """Row p of (N, 9) ``C`` = op(A_p) op(B_p), op transposing where asked; rows of (N, 9) are
+    row-major 3x3 matrices."""
+    ti.loop_config(serialize=serial)
+    for p in range(A.shape[0]):
+        _put_mat(C, p, 0, _operand(A, p, transpose_a) @ _operand(B, p, transpose_b))
+
+
+@ti.kernel
+def product3_backward(A: ti.types.ndarray(), B: ti.types.ndarray(), C_grad: ti.types.ndarray(),
+                      A_grad: ti.types.ndarray(), B_grad: ti.types.ndarray(),
+                      transpose_a: ti.template(), transpose_b: ti.template(),
+                      serial: ti.template()):  # fmt: skip
+    """Reverse of C = op(A) op(B) (:func:`product3`), rows of (N, 9): dL/d op(A) =
+    dL/dC op(B)^T and dL/d op(B) = op(A)^T dL/dC."""
+    ti.loop_config(serialize=serial)
+    for p in range(A.shape[0]):
+        a, b = _operand(A, p, transpose_a), _operand(B, p, transpose_b)
+        c_grad = _mat(C_grad, p, 0)
+        _put_mat(A_grad, p, 0, c_grad @ b.transpose())
+        _put_mat(B_grad, p, 0, a.transpose() @ c_grad)

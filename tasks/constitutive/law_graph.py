@@ -36,7 +36,7 @@ from typing import Any
 import torch
 from torch import fx, nn
 
-from bridges import closed_form, linalg
+from bridges import closed_form, linalg, products
 from tasks.constitutive import law_ops
 
 FORMAT = law_ops.GRAPH_FORMAT
@@ -221,6 +221,8 @@ def _target(op: str) -> Any:
         return closed_form_det
     if name == "linalg_inv_ex" and overload_name == "default":
         return closed_form_inverse
+    if name == "bmm" and overload_name == "default":
+        return batched_product
     packet = getattr(torch.ops.aten, name, None)
     overload = getattr(packet, overload_name, None) if packet is not None else None
     if not isinstance(overload, torch._ops.OpOverload):
@@ -270,6 +272,13 @@ def closed_form_inverse(
         return torch.ops.aten.linalg_inv_ex.default(A, check_errors=check_errors)
     inverse, det = closed_form.inverse_and_det(A)
     return inverse, (det.detach() == 0).to(torch.int32)
+
+
+def batched_product(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+    """``aten.bmm`` by :func:`bridges.products.bmm3` for (N, 3, 3) batches where a Taichi CPU
+    runtime of their precision runs, else ATen's."""
+    product = products.bmm3(A, B)
+    return product if product is not None else torch.ops.aten.bmm.default(A, B)
 
 
 def _literal(kind: str, payload: str, dtype: torch.dtype) -> Any:

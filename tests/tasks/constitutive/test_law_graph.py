@@ -3,7 +3,8 @@ parameter gradients), code that cannot be recorded is refused with a one-line hi
 trusted side refuses malformed or hostile graph documents.
 
 The captures run here, in the test process: the laws are known code (the confined capture
-process has its own tests). Nothing here simulates: no Taichi kernel is compiled."""
+process has its own tests). Nothing here simulates: the only Taichi kernels are the batched 3x3
+products and SVD backward that rebuilt graphs call."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from tasks.constitutive.law_graph import (
     MAX_NODES,
     LawGraph,
     LawGraphError,
+    batched_product,
     build_law,
     closed_form_det,
     closed_form_inverse,
@@ -515,13 +517,14 @@ def calls(law) -> list:
     return [node.target for node in law._graph_module.graph.nodes if node.op == "call_function"]
 
 
-def test_determinants_and_inverses_run_in_closed_form_and_reproduce_the_law():
+def test_determinants_inverses_and_products_run_in_closed_form_or_taichi_and_reproduce_the_law():
     document = assert_graph_reproduces(INVERSE_AND_DET_LAW)
     targets = calls(build_law(document, torch.float64))
     assert targets.count(closed_form_det) == 1 and targets.count(closed_form_inverse) == 2
-    assert not {torch.ops.aten._linalg_det.default, torch.ops.aten.linalg_inv_ex.default} & set(
-        targets
-    )
+    assert targets.count(batched_product) == 1  # F @ F.mT
+    atens = {torch.ops.aten._linalg_det.default, torch.ops.aten.linalg_inv_ex.default,
+             torch.ops.aten.bmm.default}  # fmt: skip
+    assert not atens & set(targets)
 
 
 def test_an_exactly_singular_input_is_refused_as_torch_refuses_it():

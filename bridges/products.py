@@ -1,0 +1,75 @@
+"""Batched 3x3 matrix products in one Taichi launch, with their reverse.
+
+``torch.bmm`` of a (N, 3, 3) batch costs about 60 ns a matrix on this CPU (one small matrix
+product per matrix); a Taichi loop over the batch costs its launch, about 0.1 ms, plus a few ns
+a matrix. Captured laws' ``aten.bmm`` (``F @ F.mT``, ``U @ diag(s) @ Vh``) run here
+(:mod:`tasks.constitutive.law_graph`) wherever a Taichi CPU runtime of the batch's precision
+is running. ``python benchmarks/law_ops.py`` times both.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch.autograd.function import once_differentiable
+
+from bridges.fast_svd import runs_in_taichi
+from taichi_mpm import runtime
+
+
+def _rows(t: torch.Tensor) -> tuple[torch.Tensor, bool]:
+    """(N, 9) rows of a (N, 3, 3) batch and whether they hold its transposes: a transposed view
+    (``F.mT``) is read as it lies, since copying it costs as much as the product."""
+    t = t.detach()
+    if not t.is_contiguous() and t.mT.is_contiguous():
+        return t.mT.reshape(-1, 9), True
+    return t.reshape(-1, 9).contiguous(), False
+
+
+def _serial(rows: torch.Tensor) -> bool:
+    return not runtime.parallel_worthwhile(rows.shape[0])
+
+
+class _Product3(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+        from bridges import kernels  # compiles on first use only
+
+        (a, transpose_a), (b, transpose_b) = _rows(A), _rows(B)
+        product = torch.empty_like(a)
+        kernels.product3(a, b, product, transpose_a, transpose_b, _serial(a))
+        ctx.save_for_backward(a, b)
+        ctx.transposed = transpose_a, transpose_b
+        return product.reshape(A.shape)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, C_grad: torch.Tensor):
+        from bridges import kernels
+
+        a, b = ctx.saved_tensors
+        transpose_a, transpose_b = ctx.transposed
+        c_grad, _ = _rows(C_grad.contiguous())
+        shape, serial = C_grad.shape, _serial(a)
+        wants_a, wants_b = ctx.needs_input_grad
+        if wants_a and wants_b:
+            A_grad, B_grad = torch.empty_like(a), torch.empty_like(b)
+            kernels.product3_backward(a, b, c_grad, A_grad, B_grad, transpose_a, transpose_b,
+                                      serial)  # fmt: skip
+            return A_grad.reshape(shape), B_grad.reshape(shape)
+        if wants_a:  # dL/dA = dL/dC op(B)^T
+            A_grad = torch.empty_like(a)
+            kernels.product3(c_grad, b, A_grad, False, not transpose_b, serial)
+            return A_grad.reshape(shape), None
+        B_grad = torch.empty_like(b)  # dL/dB = op(A)^T dL/dC
+        kernels.product3(a, c_grad, B_grad, not transpose_a, False, serial)
+        return None, B_grad.reshape(shape)
+
+
+def bmm3(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor | None:
+    """``torch.bmm(A, B)`` of two (N, 3, 3) batches in Taichi, or None where that does not
+    apply (other shapes, dtypes or devices, no Taichi CPU runtime of their precision)."""
+    if A.dim() != 3 or A.shape != B.shape or A.dtype != B.dtype or A.device != B.device:
+        return None
+    if not runs_in_taichi(A, ("float32", "float64")):
+        return None
+    return _Product3.apply(A, B)

@@ -1,0 +1,47 @@
+"""Batched 3x3 products in Taichi equal ``torch.bmm``, values and gradients (float64)."""
+
+import pytest
+import torch
+
+from bridges.products import bmm3
+
+
+def _batches(count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    generator = torch.Generator().manual_seed(seed)
+    return tuple(torch.randn(count, 3, 3, dtype=torch.float64, generator=generator)
+                 for _ in range(3))  # fmt: skip
+
+
+@pytest.mark.parametrize("needs", [(True, True), (True, False), (False, True)])
+def test_products_and_their_gradients_equal_bmm(needs):
+    A, B, weights = _batches(500, seed=sum(needs))
+    results = []
+    for product in (bmm3, torch.bmm):
+        a, b = A.clone().requires_grad_(needs[0]), B.clone().requires_grad_(needs[1])
+        # transposed views (read without a copy) on either side
+        out = product(a.mT if needs[1] else a, b.mT if needs[0] else b)
+        (weights * out).sum().backward()
+        results.append([out.detach(), a.grad, b.grad])
+    for got, expected in zip(*results, strict=True):
+        if expected is None:
+            assert got is None
+        else:
+            torch.testing.assert_close(got, expected, rtol=1e-13, atol=1e-13)
+
+
+def test_products_match_finite_differences():
+    A, B, _ = _batches(6, seed=5)
+    inputs = (A.requires_grad_(True), B.requires_grad_(True))
+    assert torch.autograd.gradcheck(bmm3, inputs)
+
+
+def test_other_shapes_dtypes_and_precisions_are_left_to_torch():
+    A, B, _ = _batches(4, seed=6)
+    assert bmm3(A, B[:3]) is None  # batch sizes differ
+    assert bmm3(A[0], B[0]) is None  # not a batch
+    assert bmm3(A, B.float()) is None  # dtypes differ
+    assert bmm3(A.float(), B.float()) is None  # the session's runtime is float64
+    assert (
+        bmm3(torch.randn(4, 2, 2, dtype=torch.float64), torch.randn(4, 2, 2, dtype=torch.float64))
+        is None
+    )
