@@ -275,9 +275,9 @@ def closed_form_inverse(
 
 
 def batched_product(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
-    """``aten.bmm`` by :func:`bridges.products.bmm3` for (N, 3, 3) batches where a Taichi CPU
-    runtime of their precision runs, else ATen's."""
-    product = products.bmm3(A, B)
+    """``aten.bmm`` by :func:`bridges.products.bmm3` for (N, 3, 3) batches where that is faster
+    (:func:`bridges.products.worthwhile`), else ATen's."""
+    product = products.bmm3(A, B) if products.worthwhile(A) else None
     return product if product is not None else torch.ops.aten.bmm.default(A, B)
 
 

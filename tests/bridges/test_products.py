@@ -3,7 +3,8 @@
 import pytest
 import torch
 
-from bridges.products import bmm3
+from bridges.products import MIN_BATCH, bmm3, worthwhile
+from taichi_mpm import runtime
 
 
 def _batches(count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -45,3 +46,10 @@ def test_other_shapes_dtypes_and_precisions_are_left_to_torch():
         bmm3(torch.randn(4, 2, 2, dtype=torch.float64), torch.randn(4, 2, 2, dtype=torch.float64))
         is None
     )
+
+
+def test_taichi_takes_the_product_only_where_it_is_faster():
+    """One launch beats torch.bmm from MIN_BATCH matrices, on one thread only."""
+    one_thread = runtime.current().threads == 1
+    assert not worthwhile(torch.zeros(MIN_BATCH - 1, 3, 3, dtype=torch.float64))
+    assert worthwhile(torch.zeros(MIN_BATCH, 3, 3, dtype=torch.float64)) == one_thread

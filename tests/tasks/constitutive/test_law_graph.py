@@ -521,7 +521,7 @@ def test_determinants_inverses_and_products_run_in_closed_form_or_taichi_and_rep
     document = assert_graph_reproduces(INVERSE_AND_DET_LAW)
     targets = calls(build_law(document, torch.float64))
     assert targets.count(closed_form_det) == 1 and targets.count(closed_form_inverse) == 2
-    assert targets.count(batched_product) == 1  # F @ F.mT
+    assert targets.count(batched_product) == 1  # F @ F.mT: Taichi's where it is faster
     atens = {torch.ops.aten._linalg_det.default, torch.ops.aten.linalg_inv_ex.default,
              torch.ops.aten.bmm.default}  # fmt: skip
     assert not atens & set(targets)
