@@ -35,6 +35,12 @@ def runs_in_taichi(tensor: torch.Tensor, precisions: tuple[str, ...]) -> bool:
     return info.arch == "cpu" and info.precision == _PRECISIONS[tensor.dtype]
 
 
+def serial_loops(rows: torch.Tensor) -> bool:
+    """Whether a kernel over the rows of ``rows`` should loop serially here
+    (:func:`taichi_mpm.runtime.parallel_worthwhile`)."""
+    return not runtime.parallel_worthwhile(rows.shape[0])
+
+
 def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
     """Signed (det U = det V = +1) SVD ``(U, S, Vh)`` of (..., 3, 3) ``F``, or None.
 
@@ -47,7 +53,7 @@ def taichi_svd(F: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
 
     flat = F.detach().reshape(-1, 9).contiguous()
     out = flat.new_empty(flat.shape[0], 21)  # U, S, V per row
-    kernels.svd3(flat, out, not runtime.parallel_worthwhile(flat.shape[0]))
+    kernels.svd3(flat, out, serial_loops(flat))
     batch = F.shape[:-2]
     U = out[:, :9].reshape(*batch, 3, 3)
     V = out[:, 12:].reshape(*batch, 3, 3)
@@ -78,6 +84,6 @@ def taichi_svd_backward(
     kernels.svd3_backward(
         rows(U, U, 9), rows(S, U, 3), rows(Vh, U, 9),
         rows(grads[0], U, 9), rows(grads[1], U, 3), rows(grads[2], U, 9),
-        F_grad, tol_factor, not runtime.parallel_worthwhile(F_grad.shape[0]),
+        F_grad, tol_factor, serial_loops(F_grad),
     )  # fmt: skip
     return F_grad.reshape(*batch, 3, 3)

@@ -15,9 +15,8 @@ from __future__ import annotations
 import torch
 from torch.autograd.function import once_differentiable
 
-from bridges.fast_svd import runs_in_taichi
+from bridges.fast_svd import runs_in_taichi, serial_loops
 from bridges.linalg import svd
-from taichi_mpm import runtime
 
 
 class _HenckyStress(torch.autograd.Function):
@@ -34,7 +33,8 @@ class _HenckyStress(torch.autograd.Function):
             factors = torch.cat([U.reshape(-1, 9), S, Vh.mT.reshape(-1, 9)], dim=1)
         stress = torch.empty_like(flat)
         ctx.lame = float(mu), float(lam)
-        kernels.hencky_forward(flat, factors, stress, *ctx.lame, decompose, _serial(flat))
+        serial = serial_loops(flat)
+        kernels.hencky_forward(flat, factors, stress, *ctx.lame, decompose, serial)
         ctx.save_for_backward(flat, factors)
         return stress.reshape(F.shape)
 
@@ -48,13 +48,9 @@ class _HenckyStress(torch.autograd.Function):
         lame_grad = flat.new_empty(flat.shape[0], 2)
         tol_factor = torch.finfo(flat.dtype).eps ** 0.5
         kernels.hencky_backward(flat, factors, stress_grad.reshape(-1, 9).contiguous(), F_grad,
-                                lame_grad, *ctx.lame, tol_factor, _serial(flat))  # fmt: skip
+                                lame_grad, *ctx.lame, tol_factor, serial_loops(flat))  # fmt: skip
         mu_grad, lam_grad = lame_grad.sum(0)
         return F_grad.reshape(stress_grad.shape), mu_grad, lam_grad
-
-
-def _serial(rows: torch.Tensor) -> bool:
-    return not runtime.parallel_worthwhile(rows.shape[0])
 
 
 def hencky_stress(F: torch.Tensor, mu: torch.Tensor, lam: torch.Tensor) -> torch.Tensor | None:

@@ -389,8 +389,8 @@ def hencky_backward(
     log(max(|s|, SIGMA_FLOOR)), and the SVD by :func:`_svd_adjoint`."""
     ti.loop_config(serialize=serial)
     for p in range(F.shape[0]):
-        f, u, v = _mat(F, p, 0), _mat(factors, p, 0), _mat(factors, p, 12)
-        s = ti.Vector([factors[p, 9], factors[p, 10], factors[p, 11]], dt=float)
+        f = _mat(F, p, 0)
+        u, s, v = _factors(F, factors, p, False)
         clamped, eps, t, safe, g = _hencky_terms(s, mu, lam)
         vh = v.transpose()
         piola = u @ _diag(g) @ vh
@@ -398,7 +398,8 @@ def hencky_backward(
         piola_grad = tau_grad @ f
         f_grad = tau_grad.transpose() @ piola
         ut_piola_grad = u.transpose() @ piola_grad
-        g_grad = ti.Vector([(ut_piola_grad @ v)[i, i] for i in ti.static(range(3))])
+        inner = ut_piola_grad @ v  # U^T dL/dM V: its diagonal is dL/dg
+        g_grad = ti.Vector([inner[i, i] for i in ti.static(range(3))])
         u_grad = piola_grad @ v @ _diag(g)
         vh_grad = _diag(g) @ ut_piola_grad
         t_grad = g_grad / safe

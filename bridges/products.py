@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch.autograd.function import once_differentiable
 
-from bridges.fast_svd import runs_in_taichi
+from bridges.fast_svd import runs_in_taichi, serial_loops
 from taichi_mpm import runtime
 
 #: Matrices from which one Taichi launch beats ``torch.bmm`` on one thread. With more threads
@@ -41,10 +41,6 @@ def _rows(t: torch.Tensor) -> tuple[torch.Tensor, bool]:
     return t.reshape(-1, 9).contiguous(), False
 
 
-def _serial(rows: torch.Tensor) -> bool:
-    return not runtime.parallel_worthwhile(rows.shape[0])
-
-
 class _Product3(torch.autograd.Function):
     @staticmethod
     def forward(ctx, A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
@@ -52,7 +48,7 @@ class _Product3(torch.autograd.Function):
 
         (a, transpose_a), (b, transpose_b) = _rows(A), _rows(B)
         product = torch.empty_like(a)
-        kernels.product3(a, b, product, transpose_a, transpose_b, _serial(a))
+        kernels.product3(a, b, product, transpose_a, transpose_b, serial_loops(a))
         ctx.save_for_backward(a, b)
         ctx.transposed = transpose_a, transpose_b
         return product.reshape(A.shape)
@@ -65,7 +61,7 @@ class _Product3(torch.autograd.Function):
         a, b = ctx.saved_tensors
         transpose_a, transpose_b = ctx.transposed
         c_grad, _ = _rows(C_grad.contiguous())
-        shape, serial = C_grad.shape, _serial(a)
+        shape, serial = C_grad.shape, serial_loops(a)
         wants_a, wants_b = ctx.needs_input_grad
         if wants_a and wants_b:
             A_grad, B_grad = torch.empty_like(a), torch.empty_like(b)

@@ -32,11 +32,14 @@ def _deformations(count: int, seed: int) -> torch.Tensor:
     return F
 
 
+def _lame(E, nu):
+    """Shear modulus and first Lame parameter from Young's modulus and Poisson's ratio."""
+    return E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
 def _stress_and_gradients(stress_of, F, E, nu, weights):
     F, E, nu = (t.clone().requires_grad_(True) for t in (F, E, nu))
-    mu = E / (2.0 * (1.0 + nu))
-    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    stress = stress_of(F, mu, lam)
+    stress = stress_of(F, *_lame(E, nu))
     (weights * stress).sum().backward()
     return stress.detach(), F.grad, E.grad, nu.grad
 
@@ -61,8 +64,7 @@ def test_kernels_match_finite_differences():
     nu = torch.tensor(0.25, dtype=torch.float64)
 
     def law(F, E, nu):
-        mu = E / (2.0 * (1.0 + nu))
-        return hencky_stress(F, mu, E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)))
+        return hencky_stress(F, *_lame(E, nu))
 
     inputs = tuple(t.requires_grad_(True) for t in (F, E, nu))
     assert torch.autograd.gradcheck(law, inputs, eps=1e-6, atol=1e-7, rtol=1e-6)
@@ -73,9 +75,8 @@ def test_the_law_module_runs_the_kernels():
     F = _deformations(20, seed=3).requires_grad_(True)
     stress = law(F)
     assert type(stress.grad_fn).__name__ == "_HenckyStressBackward"
-    mu = law.E / (2.0 * (1.0 + law.nu))
-    lam = law.E * law.nu / ((1.0 + law.nu) * (1.0 - 2.0 * law.nu))
-    torch.testing.assert_close(stress, hencky_stress_in_torch(F, mu, lam), rtol=1e-12, atol=1e-6)
+    expected = hencky_stress_in_torch(F, *_lame(law.E, law.nu))
+    torch.testing.assert_close(stress, expected, rtol=1e-12, atol=1e-6)
 
 
 def test_no_kernels_for_another_precision():
