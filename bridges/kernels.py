@@ -25,8 +25,11 @@ of P2G. The per-particle and per-node functions are those of
 autodiff instead.
 """
 
+from pathlib import Path
+
 import taichi as ti
 
+from taichi_mpm.front_end import shorten_positions_under
 from taichi_mpm.kernels.constitutive import J_FLOOR, SIGMA_FLOOR
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 from taichi_mpm.kernels.transfer import (
@@ -41,6 +44,8 @@ from taichi_mpm.kernels.transfer_adjoint import (
     p2g_particle_adjoint,
     update_node_adjoint,
 )
+
+shorten_positions_under(Path(__file__).parent)
 
 #: Column offsets of the packed per-particle rows.
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24
