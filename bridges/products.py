@@ -85,3 +85,17 @@ def bmm3(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor | None:
     if not runs_in_taichi(A, ("float32", "float64")):
         return None
     return _Product3.apply(A, B)
+
+
+def compile_kernels(dtype: torch.dtype) -> None:
+    """Launch the product kernels once in each orientation a captured law's products take
+    (``A @ B``, ``A @ B^T``, ``A^T @ B``), forward and backward, if :func:`worthwhile` sends
+    batches of ``dtype`` there, so that the first law that uses them does not wait for them to
+    compile (a fit worker's warm-up)."""
+    A = torch.eye(3, dtype=dtype).expand(MIN_BATCH, 3, 3).contiguous()
+    if not worthwhile(A) or not runs_in_taichi(A, ("float32", "float64")):
+        return
+    for transpose_a, transpose_b in ((False, False), (False, True), (True, False)):
+        left, right = A.clone().requires_grad_(), A.clone().requires_grad_()
+        product = bmm3(left.mT if transpose_a else left, right.mT if transpose_b else right)
+        product.sum().backward()

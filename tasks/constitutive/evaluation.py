@@ -15,6 +15,7 @@ import torch
 
 import taichi_mpm as tm
 from bridges import laws as torch_laws
+from bridges import products
 from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
@@ -22,7 +23,13 @@ from taichi_mpm import runtime
 from tasks.constitutive import feedback
 from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
-from tasks.constitutive.inner import InnerResult, InnerSettings, NoFiniteEpoch, optimize
+from tasks.constitutive.inner import (
+    InnerResult,
+    InnerSettings,
+    NoFiniteEpoch,
+    make_optimizers_once,
+    optimize,
+)
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.options import ConstitutiveOptions
@@ -65,7 +72,9 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
 def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     """Load the ground truth and launch the bridge's kernels once (a known plastic law with
     an SVD on a few 2-step segments that start from the observed reset states; the loss is
-    meaningless), so that the first evaluation pays for neither loading nor compiling them.
+    meaningless), make the inner optimizers once, and compile the batched products a captured
+    law may use (:func:`bridges.products.compile_kernels`), so that the first evaluation pays
+    for neither loading nor compiling them.
 
     Launched as an evaluation launches them: one scene copy forward (the graph-memory
     measurement), a batch of copies forward and backward (the epochs). A copy alone backward
@@ -84,6 +93,8 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     for batch, backward in ((1, False), (segments, True)):
         trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
                         backward=backward, batch=batch)  # fmt: skip
+    make_optimizers_once()
+    products.compile_kernels(dtype)
 
 
 def fit(

@@ -212,6 +212,15 @@ class _Fit:
         return segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
 
 
+def make_optimizers_once() -> None:
+    """Make each inner optimizer once and drop it: the first optimizer a process makes imports
+    torch's compiler stack (``torch._dynamo``), about a second on this CPU, which a fit
+    worker's warm-up pays so that its first evaluation does not."""
+    probe = [torch.zeros(1, requires_grad=True)]
+    torch.optim.Adam(probe)
+    torch.optim.LBFGS(probe)
+
+
 def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> None:
     optimizer = torch.optim.Adam(trainable, lr=settings.learning_rate)
     for epoch in range(settings.epochs + 1):

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from bridges import laws as torch_laws
+from bridges import products
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
@@ -31,7 +32,7 @@ from tasks.constitutive.evaluation import (
     fitted_evaluation,
 )
 from tasks.constitutive.ground_truth import Trajectory
-from tasks.constitutive.inner import InnerSettings
+from tasks.constitutive.inner import InnerSettings, make_optimizers_once
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.observed.data import ObservedData, read_truth
 from tasks.observed.options import ObservedOptions
@@ -70,13 +71,16 @@ def setup(options: dict[str, Any]) -> tuple[ObservedOptions, ObservedData, torch
 
 def warm_up(options: dict[str, Any]) -> None:
     """Compile the kernels of a checkpointed forward and backward pass (two 1-step segments
-    with a von Mises law), so the first evaluation does not pay for them."""
+    with a von Mises law) and the batched products, and make the inner optimizers once, so
+    the first evaluation does not pay for them."""
     typed, data, dtype = setup(options)
     elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
     plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
     positions, weights = data.dense()
     trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
                     weights=np.ones_like(weights[:3]))  # fmt: skip
+    make_optimizers_once()
+    products.compile_kernels(dtype)
 
 
 def loss_text(data: ObservedData) -> str:

@@ -1,5 +1,9 @@
 """Batched 3x3 products in Taichi equal ``torch.bmm``, values and gradients (float64)."""
 
+import os
+import subprocess
+import sys
+
 import pytest
 import torch
 
@@ -53,3 +57,39 @@ def test_taichi_takes_the_product_only_where_it_is_faster():
     one_thread = runtime.current().threads == 1
     assert not worthwhile(torch.zeros(MIN_BATCH - 1, 3, 3, dtype=torch.float64))
     assert worthwhile(torch.zeros(MIN_BATCH, 3, 3, dtype=torch.float64)) == one_thread
+
+
+ONE_THREAD = """
+import taichi.lang.kernel_impl as kernel_impl
+import torch
+import taichi_mpm
+from bridges import products
+
+taichi_mpm.init(arch="cpu", precision="float32")
+products.compile_kernels(torch.float32)
+compiled = []
+materialize = kernel_impl.Kernel.materialize
+def counting(self, *args, **kwargs):
+    key = kwargs.get("key", args[0] if args else None)
+    if key not in self.compiled_kernels:
+        compiled.append(self.func.__name__)
+    return materialize(self, *args, **kwargs)
+kernel_impl.Kernel.materialize = counting
+F = torch.randn(products.MIN_BATCH, 3, 3, requires_grad=True)
+s = torch.rand(products.MIN_BATCH, 3)
+U, V = torch.linalg.qr(torch.randn(2, products.MIN_BATCH, 3, 3)).Q
+Vh = V.mT
+first = products.bmm3(F, F.mT)  # F F^T
+second = products.bmm3(products.bmm3(U, torch.diag_embed(s).requires_grad_()), Vh)
+(first.sum() + second.sum()).backward()
+print(compiled)
+"""
+
+
+def test_compile_kernels_leaves_a_laws_products_nothing_to_compile():
+    """In a one-thread float32 runtime (where products run in Taichi), after the warm-up the
+    products of ``F @ F.mT`` and ``U @ diag(s) @ Vh`` and their reverse compile nothing."""
+    env = {**os.environ, "TI_CPU_MAX_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", ONE_THREAD], capture_output=True, text=True,
+                         check=True, env=env)  # fmt: skip
+    assert out.stdout.strip().splitlines()[-1] == "[]"
