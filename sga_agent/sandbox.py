@@ -247,12 +247,16 @@ class _LineProcess:
             return ""
         return text.decode("utf-8", errors="replace")
 
-    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
-        """End the process by closing its input, so that it exits normally (Taichi writes its
-        kernel cache at exit); SIGKILL it if it has not exited after ``timeout_s``."""
+    def end_input(self) -> None:
+        """Close the process's input: it finishes what it does and exits normally."""
         with contextlib.suppress(OSError):
             if self.process.stdin is not None:
                 self.process.stdin.close()
+
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+        """End the process by closing its input, so that it exits normally (Taichi writes its
+        kernel cache at exit); SIGKILL it if it has not exited after ``timeout_s``."""
+        self.end_input()
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.process.wait(timeout_s)
         self.kill()
@@ -310,20 +314,29 @@ class EvaluationSlot:
         return evaluation
 
     def close(self) -> None:
-        """Stop the helper processes (letting them exit normally) and remove their folder."""
-        for helper in (self._capture, self._fit):
-            if helper is not None:
-                helper[1].close()
+        """Stop the helper processes (letting them exit normally, all at once) and remove
+        their folder."""
+        self.end_input()
+        for helper in self._helpers():
+            helper.close()
         self._capture = self._fit = None
         shutil.rmtree(self._folder, ignore_errors=True)
+
+    def end_input(self) -> None:
+        """Close the helpers' input: they exit normally once done, without being waited for
+        (:meth:`close` waits)."""
+        for helper in self._helpers():
+            helper.end_input()
+
+    def _helpers(self) -> list[_LineProcess]:
+        return [helper[1] for helper in (self._capture, self._fit) if helper is not None]
 
     def kill(self) -> None:
         """Kill the helper processes now and start no new ones: an evaluation running in
         another thread ends at once, invalid ("the pool was stopped")."""
         self._stopped = True
-        for helper in (self._capture, self._fit):
-            if helper is not None:
-                helper[1].kill()
+        for helper in self._helpers():
+            helper.kill()
 
     # ------------------------------------------------------------------ capture
 
@@ -633,8 +646,10 @@ class SandboxPool:
         return [future.result() for future in futures]
 
     def close(self) -> None:
-        """Wait for running evaluations, then stop every helper process."""
+        """Wait for running evaluations, then stop every helper process (all at once)."""
         self._executor.shutdown(wait=True)
+        for evaluator in self._evaluators:
+            evaluator.end_input()
         for evaluator in self._evaluators:
             evaluator.close()
 
