@@ -12,7 +12,9 @@ table gives the minimum, median and maximum epoch over all rounds, the ratio of 
 the peak resident memory and the load average around the run. Without ``--original`` only our
 own numbers are printed. ``--baseline`` adds another checkout of this project (a worktree of an
 earlier commit) to the rotation, run the same way, with its ratio to ours. The original's driver
-covers elastic and plasticine; our own runs cover every constitutive task. Usage::
+covers elastic and plasticine; our own runs cover every constitutive task. ``--profile`` prints
+where our evaluations' time goes, by torch operation (each Taichi-backed step, SVD, stress or
+product is one), and the time outside any operation. Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
         [--original ~/SGA --original-python ~/orig-venv/bin/python] [--baseline ../before]
@@ -75,18 +77,19 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -
     data = json.loads(graph.read_text())  # the law's graph: what the fit worker receives
     # compile every kernel, load the ground truth
     evaluator.evaluate(data, EvaluationSettings(epochs=1, options=options))
+    settings = EvaluationSettings(epochs=epochs, options=options)
     started = time.perf_counter()
     if profile:
-        import cProfile
-        import pstats
+        from torch.profiler import ProfilerActivity
+        from torch.profiler import profile as torch_profile
 
-        profiler = cProfile.Profile()
-        settings = EvaluationSettings(epochs=epochs, options=options)
-        result = profiler.runcall(evaluator.evaluate, data, settings)
-        pstats.Stats(profiler, stream=sys.stderr).sort_stats("tottime").print_stats(15)
+        with torch_profile(activities=[ProfilerActivity.CPU]) as profiler:
+            result = evaluator.evaluate(data, settings)
+        seconds = time.perf_counter() - started
+        print(where_the_time_goes(profiler, seconds, epochs), file=sys.stderr)
     else:
-        result = evaluator.evaluate(data, EvaluationSettings(epochs=epochs, options=options))
-    seconds = time.perf_counter() - started
+        result = evaluator.evaluate(data, settings)
+        seconds = time.perf_counter() - started
     return {
         "task": task,
         "valid": result.valid,
@@ -99,6 +102,26 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "baseline_mb": baseline_mb,
     }
+
+
+def where_the_time_goes(profiler, seconds: float, epochs: int, rows: int = 25) -> str:
+    """The profiled evaluation's time by operation (self time: a Taichi-backed autograd
+    Function's row holds its kernel launches), the rest being Python outside any operation."""
+    averages = sorted(profiler.key_averages(), key=lambda a: a.self_cpu_time_total, reverse=True)
+    total = sum(average.self_cpu_time_total for average in averages) / 1e6
+    lines = [f"where {seconds:.2f} s go ({epochs} epochs and the final forward pass, profiled; "
+             "the profiler adds its own overhead):",
+             f"{'operation':<40} {'calls':>7} {'self s':>8} {'share':>6}"]  # fmt: skip
+    for average in averages[:rows]:
+        self_seconds = average.self_cpu_time_total / 1e6
+        lines.append(f"{average.key[:40]:<40} {average.count:>7} {self_seconds:>8.3f} "
+                     f"{self_seconds / seconds:>6.1%}")  # fmt: skip
+    rest = sum(average.self_cpu_time_total for average in averages[rows:]) / 1e6
+    lines.append(f"{'other operations':<40} {'':>7} {rest:>8.3f} {rest / seconds:>6.1%}")
+    outside = seconds - total
+    lines.append(f"{'outside operations (Python)':<40} {'':>7} {outside:>8.3f} "
+                 f"{outside / seconds:>6.1%}")  # fmt: skip
+    return "\n".join(lines)
 
 
 def _resident_mb() -> float:
@@ -176,7 +199,8 @@ def main() -> None:
                         help="where the original's ground truth is written once")  # fmt: skip
     parser.add_argument("--baseline", type=Path,
                         help="another checkout of this project, timed beside ours")  # fmt: skip
-    parser.add_argument("--profile", action="store_true", help="cProfile of our evaluation")
+    parser.add_argument("--profile", action="store_true",
+                        help="where our evaluation's time goes, by torch operation")  # fmt: skip
     parser.add_argument("--threads", type=int, default=threads_per_worker(1),
                         help="our threads (torch and Taichi); default: what sga-agent evaluate "
                         "gives one evaluation, the machine's cores")  # fmt: skip
