@@ -93,6 +93,12 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     for batch, backward in ((1, False), (segments, True)):
         trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
                         backward=backward, batch=batch)  # fmt: skip
+    warm_up_fitting(dtype)
+
+
+def warm_up_fitting(dtype: torch.dtype) -> None:
+    """Pay the inner fit's first-use costs that no law changes: its optimizers (a process's
+    first one imports torch's compiler stack) and the batched products' kernels."""
     make_optimizers_once()
     products.compile_kernels(dtype)
 

@@ -18,7 +18,6 @@ import numpy as np
 import torch
 
 from bridges import laws as torch_laws
-from bridges import products
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
@@ -30,9 +29,10 @@ from tasks.constitutive.evaluation import (
     ensure_runtime,
     fit,
     fitted_evaluation,
+    warm_up_fitting,
 )
 from tasks.constitutive.ground_truth import Trajectory
-from tasks.constitutive.inner import InnerSettings, make_optimizers_once
+from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.observed.data import ObservedData, read_truth
 from tasks.observed.options import ObservedOptions
@@ -79,8 +79,7 @@ def warm_up(options: dict[str, Any]) -> None:
     positions, weights = data.dense()
     trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
                     weights=np.ones_like(weights[:3]))  # fmt: skip
-    make_optimizers_once()
-    products.compile_kernels(dtype)
+    warm_up_fitting(dtype)
 
 
 def loss_text(data: ObservedData) -> str:
