@@ -3,8 +3,8 @@
 Taichi 1.7 turns each kernel's Python into its IR in every process, even when the offline
 cache already holds the compiled kernel. On each AST node it visits it formats a position
 for error messages: the file and line, and the node's source lines wrapped by ``textwrap``
-with a caret line under each. The bridge's step kernels visit about 47,000 nodes once their
-static loops are unrolled, and the formatting is a large share of their front end
+with a caret line under each. The bridge's step kernels visit tens of thousands of nodes once
+their static loops are unrolled, and the formatting is a large share of their front end
 (``benchmarks/evaluate_against.py`` times a lone evaluation against a checkout without it).
 
 :func:`shorten_positions_under` makes the positions of kernels defined under a folder the
