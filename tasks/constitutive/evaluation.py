@@ -27,8 +27,8 @@ from tasks.constitutive.inner import (
     InnerResult,
     InnerSettings,
     NoFiniteEpoch,
-    make_optimizers_once,
     optimize,
+    prepare_optimizer,
 )
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
@@ -72,7 +72,7 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
 def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     """Load the ground truth and launch the bridge's kernels once (a known plastic law with
     an SVD on a few 2-step segments that start from the observed reset states; the loss is
-    meaningless), make the inner optimizers once, and compile the batched products a captured
+    meaningless), prepare the inner optimizer, and compile the batched products a captured
     law may use (:func:`bridges.products.compile_kernels`), so that the first evaluation pays
     for neither loading nor compiling them.
 
@@ -93,13 +93,13 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
     for batch, backward in ((1, False), (segments, True)):
         trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
                         backward=backward, batch=batch)  # fmt: skip
-    warm_up_fitting(dtype)
+    warm_up_fitting(dtype, options.optimizer or spec.optimizer)
 
 
-def warm_up_fitting(dtype: torch.dtype) -> None:
-    """Pay the inner fit's first-use costs that no law changes: its optimizers (a process's
-    first one imports torch's compiler stack) and the batched products' kernels."""
-    make_optimizers_once()
+def warm_up_fitting(dtype: torch.dtype, optimizer: str) -> None:
+    """Pay the inner fit's first-use costs that no law changes: its ``optimizer`` (see
+    :func:`~tasks.constitutive.inner.prepare_optimizer`) and the batched products' kernels."""
+    prepare_optimizer(optimizer)
     products.compile_kernels(dtype)
 
 

@@ -3,7 +3,10 @@
 A trajectory holds the particle positions of every step and the full state (x, v, C, F) at
 every teacher-forcing reset step. Generation is deterministic (serial CPU loops); the cache
 file name is a hash of everything that determines the result, so a changed material, scene
-or precision regenerates it, and a missing or unreadable file is simply regenerated.
+or precision regenerates it, and a missing or unreadable file is simply regenerated. A process
+reads and checks a file once and keeps what it read for as long as the file is unchanged (a
+fit worker scores candidate after candidate against the same one): callers share the arrays
+and must not modify them.
 """
 
 from __future__ import annotations
@@ -22,6 +25,10 @@ from taichi_mpm import runtime
 
 #: Bump when the simulator's results change, so old cache files are not reused.
 FORMAT_VERSION = 1
+#: Trajectories read in this process, most recent last: file -> (its stat when read, data).
+_READ: dict[Path, tuple[tuple[int, int, int], Trajectory]] = {}
+#: Files whose trajectories are kept at once.
+READ_KEPT = 4
 
 
 @dataclass(frozen=True)
@@ -80,12 +87,16 @@ def load_or_generate(
     path = cache_dir() / "ground_truth" / f"{name}-{cache_key(material, scene, reset_every)}.npz"
     digest_path = path.with_name(path.name + ".sha256")
     try:
+        signature = _signature(path)
+        if path in _READ and _READ[path][0] == signature:
+            return _READ[path][1]
         content = path.read_bytes()
         if hashlib.sha256(content).hexdigest() != digest_path.read_text().strip():
             raise ValueError("content hash differs from the one recorded at generation")
         with np.load(io.BytesIO(content)) as data:
             states = {key: data[f"state_{key}"] for key in "xvCF"}
-            return Trajectory(data["positions"], data["reset_steps"], states)
+            return _remember(path, signature, Trajectory(data["positions"],
+                                                         data["reset_steps"], states))
     except (OSError, KeyError, ValueError):
         pass  # missing, damaged or altered: regenerate
     trajectory = generate(material, scene, reset_every)
@@ -102,4 +113,18 @@ def load_or_generate(
     partial_digest.write_text(digest + "\n")
     partial.replace(path)  # atomic: concurrent workers never read half a file
     partial_digest.replace(digest_path)
+    return _remember(path, _signature(path), trajectory)
+
+
+def _signature(path: Path) -> tuple[int, int, int]:
+    """What changes when a file is replaced or rewritten: inode, size, modification time."""
+    status = path.stat()
+    return status.st_ino, status.st_size, status.st_mtime_ns
+
+
+def _remember(path: Path, signature: tuple[int, int, int], trajectory: Trajectory) -> Trajectory:
+    _READ.pop(path, None)
+    _READ[path] = (signature, trajectory)
+    while len(_READ) > READ_KEPT:
+        del _READ[next(iter(_READ))]
     return trajectory

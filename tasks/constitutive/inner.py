@@ -26,6 +26,7 @@ from bridges.rollout import (
     segments_per_batch,
     trajectory_loss,
 )
+from tasks.constitutive.adam import Adam
 from tasks.constitutive.ground_truth import Trajectory
 
 #: Inner optimizers: ``InnerSettings.optimizer``.
@@ -212,20 +213,20 @@ class _Fit:
         return segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
 
 
-def make_optimizers_once() -> None:
-    """Make each inner optimizer once and drop it: the first optimizer a process makes imports
-    torch's compiler stack (``torch._dynamo``), about a second on this CPU, which a fit
-    worker's warm-up pays so that its first evaluation does not."""
-    probe = [torch.zeros(1, requires_grad=True)]
-    torch.optim.Adam(probe)
-    torch.optim.LBFGS(probe)
+def prepare_optimizer(name: str) -> None:
+    """Pay the first use of inner optimizer ``name`` ahead of the first evaluation: L-BFGS
+    comes from ``torch.optim``, whose first optimizer in a process imports torch's compiler
+    stack (``torch._dynamo``), about a second on this CPU; Adam is :mod:`.adam`'s and needs
+    nothing."""
+    if name == "lbfgs":
+        torch.optim.LBFGS([torch.zeros(1, requires_grad=True)])
 
 
 def _adam(fit: _Fit, trainable: list[nn.Parameter], settings: InnerSettings) -> None:
-    optimizer = torch.optim.Adam(trainable, lr=settings.learning_rate)
+    optimizer = Adam(trainable, lr=settings.learning_rate)
     for epoch in range(settings.epochs + 1):
         last = epoch == settings.epochs
-        optimizer.zero_grad(set_to_none=True)
+        optimizer.zero_grad()
         if fit.score(backward=not last) is None:
             fit.result.stopped = fit.failure
             return

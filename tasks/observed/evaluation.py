@@ -71,15 +71,15 @@ def setup(options: dict[str, Any]) -> tuple[ObservedOptions, ObservedData, torch
 
 def warm_up(options: dict[str, Any]) -> None:
     """Compile the kernels of a checkpointed forward and backward pass (two 1-step segments
-    with a von Mises law) and the batched products, and make the inner optimizers once, so
-    the first evaluation does not pay for them."""
+    with a von Mises law) and the batched products, and prepare the inner optimizer, so the
+    first evaluation does not pay for them."""
     typed, data, dtype = setup(options)
     elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
     plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
     positions, weights = data.dense()
     trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
                     weights=np.ones_like(weights[:3]))  # fmt: skip
-    warm_up_fitting(dtype)
+    warm_up_fitting(dtype, typed.optimizer or "adam")
 
 
 def loss_text(data: ObservedData) -> str:

@@ -24,6 +24,7 @@ def test_cached_regenerated_and_deterministic(cache):
     assert first.states["F"].shape == (2, 1000, 3, 3)
     # the state at a reset step is the observed one
     assert np.array_equal(first.states["x"][1], first.positions[100])
+    assert ground_truth(spec, steps=120) is first  # kept while the file is unchanged
 
     files[0].write_bytes(b"damaged")
     again = ground_truth(spec, steps=120)
