@@ -1,5 +1,5 @@
-"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS]``, run by
-.sandbox.
+"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS [STAGES]]``,
+run by .sandbox.
 
 It scores captured solutions: one request per line of its standard input::
 
@@ -8,10 +8,15 @@ It scores captured solutions: one request per line of its standard input::
 and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
 It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
 ``evaluate`` checks before it uses it. So what it reports can be believed, and it stays warm
-(torch, Taichi, kernels and ground truth loaded) from one candidate to the next. Once it has
-said it is ready it runs the task's ``warm_up_fit(OPTIONS)`` if the task has one (OPTIONS: the
-JSON task options of its evaluations), so that the first candidate does not pay for loading
-and compiling; a request sent meanwhile waits in the pipe.
+(torch, Taichi, kernels and ground truth loaded) from one candidate to the next.
+
+Once it has said it is ready it runs the task's ``warm_up_fit(OPTIONS)`` if the task has one
+(OPTIONS: the JSON task options of its evaluations), so that candidates do not pay for loading
+and compiling. A warm-up that returns an iterator comes in stages, the ones every evaluation
+needs first: a stage starts only while no request waits, so a waiting candidate goes before
+the remaining stages, which run whenever the worker next waits for a request, and those not
+reached when the input ends are skipped. STAGES, if given, is the most stages it runs ahead
+of requests (a worker for a single candidate needs the first only).
 
 Its writable private memory is limited (``RLIMIT_DATA``, MEMORY_MB MiB; see :mod:`.sandbox`). A
 failure to allocate becomes an ``out_of_memory`` Evaluation, after which the worker exits so
@@ -21,11 +26,14 @@ that the next candidate gets a fresh process. Prints of the task go to standard 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import resource
+import select
 import sys
-from typing import Any
+from collections.abc import Iterator
+from typing import IO, Any
 
 from sga_agent import registry
 from sga_agent.helper_protocol import answer, describe, start_helper
@@ -36,8 +44,9 @@ TRACEBACK_TAIL_CHARS = 4000
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if len(args) not in (2, 3):
-        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS]", file=sys.stderr)
+    if len(args) not in (2, 3, 4):
+        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS [STAGES]]",
+              file=sys.stderr)  # fmt: skip
         return 2
     answers = start_helper()
     memory = int(args[1]) * 2**20
@@ -49,9 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as error:  # a plugin may fail to import in any way
         task, failure = None, _from_exception(f"could not load task {args[0]!r}:", error)
     answer(answers, {"ready": failure is None})
-    if task is not None and len(args) == 3:
-        warm_up(task, json.loads(args[2]))
-    for line in sys.stdin:
+    stages = None
+    if task is not None and len(args) >= 3:
+        stages = warm_up(task, json.loads(args[2]))
+        if stages is not None and len(args) == 4:
+            stages = itertools.islice(stages, int(args[3]))
+    while line := next_request(sys.stdin, stages):
         request = json.loads(line)
         evaluation = failure or score(task, request["data"], request["settings"])
         answer(answers, evaluation.to_dict())
@@ -60,16 +72,41 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def warm_up(task: Task, options: dict[str, Any]) -> None:
-    """The task's own ``warm_up_fit``, if any; a failure is left to the evaluations to meet."""
+def warm_up(task: Task, options: dict[str, Any]) -> Iterator[None] | None:
+    """The stages of the task's own ``warm_up_fit`` still to run (None: all done or none)."""
     warm = getattr(task, "warm_up_fit", None)
     if not callable(warm):
-        return
+        return None
     try:
-        warm(options)
+        stages = warm(options)
     except Exception as error:  # the first evaluation meets and reports what is wrong
-        described, formatted = describe(error, TRACEBACK_TAIL_CHARS)
-        print(f"warm-up failed: {described}\n{formatted}", file=sys.stderr)
+        _warm_up_failed(error)
+        return None
+    return iter(stages) if stages is not None else None
+
+
+def next_request(requests: IO[str], stages: Iterator[None] | None) -> str:
+    """The next request line ("" once the input ends), running warm-up ``stages`` while none
+    waits."""
+    while stages is not None and not _waiting(requests):
+        try:
+            next(stages)
+        except StopIteration:
+            stages = None
+        except Exception as error:
+            _warm_up_failed(error)
+            stages = None
+    return requests.readline()
+
+
+def _waiting(requests: IO[str]) -> bool:
+    """Whether a request (or the end of the input) can be read without waiting."""
+    return bool(select.select([requests], [], [], 0)[0])
+
+
+def _warm_up_failed(error: Exception) -> None:
+    described, formatted = describe(error, TRACEBACK_TAIL_CHARS)
+    print(f"warm-up failed: {described}\n{formatted}", file=sys.stderr)
 
 
 def score(task: Task, data: Any, settings: dict[str, Any]) -> Evaluation:

@@ -193,8 +193,11 @@ class _LineProcess:
         _RUNNING.add(self)
         self._pending = bytearray()
 
-    def ask(self, message: dict[str, Any] | None, timeout_s: float) -> dict[str, Any]:
-        """Send ``message`` (None: just wait) and return the answer line, parsed.
+    def ask(
+        self, message: dict[str, Any] | None, timeout_s: float, last: bool = False
+    ) -> dict[str, Any]:
+        """Send ``message`` (None: just wait) and return the answer line, parsed; ``last``:
+        close the input once it is sent (the process exits once it has answered).
 
         Raises :class:`HelperFailure` (after killing the process) when it does not answer in
         time, exits, or answers something that is not a JSON object.
@@ -204,6 +207,8 @@ class _LineProcess:
             if message is not None:
                 self.process.stdin.write((json.dumps(message) + "\n").encode())
                 self.process.stdin.flush()
+            if last:
+                self.end_input()
             line = self._read_line(time.monotonic() + timeout_s)
             answer = json.loads(line)
             if not isinstance(answer, dict):
@@ -279,13 +284,22 @@ class EvaluationSlot:
     The capture server is kept for as long as the task is the same; the fit worker for as long
     as the task and the settings' ``options`` are the same (a task may set up its process from
     them, e.g. the floating-point precision). Helpers that fail are started afresh.
+
+    A ``one_shot`` slot evaluates one candidate: its fit worker warms up only the first stage
+    of the task's warm-up (what every evaluation needs; see :mod:`.fit_worker`), and each
+    helper's input is closed once its request is sent, so that both exit as soon as they have
+    answered.
     """
 
     def __init__(
-        self, limits: SandboxLimits, extra_python_path: Sequence[str | os.PathLike[str]] = ()
+        self,
+        limits: SandboxLimits,
+        extra_python_path: Sequence[str | os.PathLike[str]] = (),
+        one_shot: bool = False,
     ) -> None:
         self.limits = limits
         self.extra_python_path = tuple(extra_python_path)
+        self.one_shot = one_shot
         self._folder = Path(tempfile.mkdtemp(prefix="sga-sandbox-"))
         self._capture: tuple[str, _LineProcess] | None = None
         self._fit: tuple[str, _LineProcess] | None = None
@@ -353,7 +367,7 @@ class EvaluationSlot:
             "isolation": asdict(detect_isolation()) if self.limits.isolation else None,
         }
         try:
-            reply = server.ask(request, timeout + 30)
+            reply = server.ask(request, timeout + 30, last=self.one_shot)
         except HelperFailure as error:
             self._capture = None
             if str(error) == "timeout":
@@ -398,7 +412,8 @@ class EvaluationSlot:
         except HelperFailure as error:
             return Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
         try:
-            answer = worker.ask({"data": data, "settings": settings}, remaining)
+            answer = worker.ask({"data": data, "settings": settings}, remaining,
+                                last=self.one_shot)  # fmt: skip
         except HelperFailure as error:
             self._fit = None
             if str(error) == "timeout":
@@ -431,6 +446,8 @@ class EvaluationSlot:
         env = worker_environment(self.limits, self.extra_python_path)
         command = [sys.executable, "-m", "sga_agent.fit_worker", task,
                    str(self.limits.memory_mb), options]  # fmt: skip
+        if self.one_shot:
+            command.append("1")  # warm-up stages run ahead of the request
         self._fit = (key, _LineProcess(command, env, self._folder, "fit"))
         self._fit_ready = False
 
@@ -578,7 +595,7 @@ def evaluate_in_sandbox(
         ``settings.options`` is not JSON-serialisable (a caller error, not a candidate's).
     """
     _settings_json(settings)
-    evaluator = EvaluationSlot(limits, extra_python_path)
+    evaluator = EvaluationSlot(limits, extra_python_path, one_shot=True)
     try:
         return evaluator.evaluate(task, solution, settings)
     finally:

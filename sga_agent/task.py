@@ -242,6 +242,9 @@ class Task(Protocol):
     ``warm_up_solutions() -> list[str]`` (captured when a capture server starts; default: the
     seed) and ``warm_up_fit(options: dict)`` (run by a fit worker once it is ready, with the
     options its evaluations will use: load data, compile kernels; it runs no candidate code).
+    A ``warm_up_fit`` that returns an iterator (a generator yielding between stages) is run in
+    stages, the most needed first, none starting while a candidate waits (see
+    :mod:`sga_agent.fit_worker`).
 
     ``solution_with_parameters(solution: str, parameters: dict) -> str``, also optional,
     writes fitted parameter values into a solution for people to read (the end of a search,

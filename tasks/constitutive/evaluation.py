@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import torch
@@ -33,7 +34,7 @@ from tasks.constitutive.inner import (
 from tasks.constitutive.law_code import describe_error
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.options import ConstitutiveOptions
-from tasks.constitutive.specs import KNOWN_ELASTIC, ConstitutiveSpec
+from tasks.constitutive.specs import ELASTIC_TRUTH, KNOWN_ELASTIC, ConstitutiveSpec
 
 
 def ensure_runtime(precision: str) -> None:
@@ -69,30 +70,44 @@ def known_elastic_law(dtype: torch.dtype) -> torch.nn.Module:
     return law.requires_grad_(False)
 
 
-def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> None:
-    """Load the ground truth and launch the bridge's kernels once (a known plastic law with
-    an SVD on a few 2-step segments that start from the observed reset states; the loss is
-    meaningless), prepare the inner optimizer, and compile the batched products a captured
-    law may use (:func:`bridges.products.compile_kernels`), so that the first evaluation pays
-    for neither loading nor compiling them.
+def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> Iterator[None]:
+    """Pay an evaluation's first-use costs ahead of it, in stages (a generator, see
+    :mod:`sga_agent.fit_worker`), the ones every evaluation needs first:
 
-    Launched as an evaluation launches them: one scene copy forward (the graph-memory
-    measurement), a batch of copies forward and backward (the epochs). A copy alone backward
-    (no teacher forcing, or a short last segment) is left to compile when first needed: Taichi
-    runs its Python front end on each kernel in every process, even when its offline cache
-    has it."""
+    1. the ground truth, and the bridge's kernels launched with known laws on a few 2-step
+       segments that start from the observed reset states (the loss is meaningless): for the
+       elastic task a neo-Hookean law, which needs no SVD; for the plastic ones von Mises and
+       the known elastic law, whose Hencky stress every evaluation runs;
+    2. for the elastic task, the same with von Mises and the Hencky stress (a law may use an
+       SVD);
+    3. the inner optimizer and the batched products a captured law may use
+       (:func:`warm_up_fitting`).
+
+    Kernels are launched as an evaluation launches them: one scene copy forward (the
+    graph-memory measurement), a batch of copies forward and backward (the epochs). A copy
+    alone backward (no teacher forcing, or a short last segment) is left to compile when
+    first needed: Taichi runs its Python front end on each kernel in every process, even when
+    its offline cache has it."""
     ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()
     observed = ground_truth(spec, options.steps)
     segments, segment = min(len(observed.states["x"]), 5), 2
     steps = min(segments * segment, observed.positions.shape[0] - 1)
     scene = tm.paper_scene(steps=steps)
-    plastic = torch_laws.VonMises(yield_stress=KNOWN_ELASTIC.E * 1e-3, E=KNOWN_ELASTIC.E,
-                                  nu=KNOWN_ELASTIC.nu, dtype=dtype)  # fmt: skip
-    rollout = Rollout(scene, plastic, known_elastic_law(dtype))
-    for batch, backward in ((1, False), (segments, True)):
-        trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
-                        backward=backward, batch=batch)  # fmt: skip
+
+    def launch(plastic: torch.nn.Module, elastic: torch.nn.Module) -> None:
+        rollout = Rollout(scene, plastic, elastic)
+        for batch, backward in ((1, False), (segments, True)):
+            trajectory_loss(rollout, observed.positions[: steps + 1], observed.states, segment,
+                            backward=backward, batch=batch)  # fmt: skip
+
+    if spec.searched == "elastic":
+        launch(torch_laws.NoPlasticity(), torch_laws.NeoHookean(**ELASTIC_TRUTH, dtype=dtype))
+        yield
+    launch(torch_laws.VonMises(yield_stress=KNOWN_ELASTIC.E * 1e-3, E=KNOWN_ELASTIC.E,
+                               nu=KNOWN_ELASTIC.nu, dtype=dtype),
+           known_elastic_law(dtype))  # fmt: skip
+    yield
     warm_up_fitting(dtype, options.optimizer or spec.optimizer)
 
 

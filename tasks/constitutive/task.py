@@ -7,6 +7,7 @@ graph (in the trusted fit worker, which never runs the law's code).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
@@ -54,11 +55,11 @@ class ConstitutiveTask:
 
         return [self.spec.seed, WARM_UP_LAW]
 
-    def warm_up_fit(self, options: dict[str, Any]) -> None:
-        """Ground truth and every kernel an evaluation launches, loaded before the first one."""
+    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+        """Ground truth and every kernel an evaluation launches, loaded in stages."""
         from tasks.constitutive.evaluation import warm_up
 
-        warm_up(self.spec, ConstitutiveOptions(**options))
+        return warm_up(self.spec, ConstitutiveOptions(**options))
 
     def check_solution(self, code: str) -> None:
         """One class Physics(nn.Module), defaulted __init__, forward(self, F) (nothing is run)."""

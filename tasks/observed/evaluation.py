@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -69,16 +70,17 @@ def setup(options: dict[str, Any]) -> tuple[ObservedOptions, ObservedData, torch
     return typed, ObservedData.load(typed.observation, typed.frames), torch_dtype()
 
 
-def warm_up(options: dict[str, Any]) -> None:
-    """Compile the kernels of a checkpointed forward and backward pass (two 1-step segments
-    with a von Mises law) and the batched products, and prepare the inner optimizer, so the
-    first evaluation does not pay for them."""
+def warm_up(options: dict[str, Any]) -> Iterator[None]:
+    """Two warm-up stages (see :mod:`sga_agent.fit_worker`): the kernels of a checkpointed
+    forward and backward pass (two 1-step segments with a von Mises law), then the inner
+    optimizer and the batched products, so that evaluations do not pay for them."""
     typed, data, dtype = setup(options)
     elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
     plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
     positions, weights = data.dense()
     trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
                     weights=np.ones_like(weights[:3]))  # fmt: skip
+    yield
     warm_up_fitting(dtype, typed.optimizer or "adam")
 
 

@@ -9,6 +9,7 @@ checked exactly as in the constitutive tasks; the fit runs without teacher forci
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
@@ -65,10 +66,10 @@ class ObservedTask(ConstitutiveTask):
 
         return [prompt_text.ELASTIC_SEED, prompt_text.PLASTIC_SEED, WARM_UP_LAW]
 
-    def warm_up_fit(self, options: dict[str, Any]) -> None:
+    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
         from tasks.observed.evaluation import warm_up
 
-        warm_up(options)
+        return warm_up(options)
 
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         from tasks.observed.evaluation import evaluate

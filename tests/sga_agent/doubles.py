@@ -9,7 +9,9 @@ sandbox did.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
@@ -69,6 +71,24 @@ class WarmingTask(ExecTask):
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         evaluation = super().evaluate(data, settings)
         evaluation.extras.update(warmed_with=WarmingTask.warmed_with, fit_pid=os.getpid())
+        return evaluation
+
+
+class StagedWarmingTask(ExecTask):
+    """:class:`ExecTask` whose fit warm-up comes in three stages, each noted as it runs in the
+    file named by the option ``notes``; its evaluations report the stages run before them."""
+
+    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+        notes = Path(options["notes"])
+        for stage in ("1", "2", "3"):
+            with notes.open("a", encoding="utf-8") as file:
+                file.write(stage + "\n")
+            yield
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        evaluation = super().evaluate(data, settings)
+        notes = Path(settings.options["notes"])
+        evaluation.extras["stages_done"] = notes.read_text().split() if notes.exists() else []
         return evaluation
 
 

@@ -5,8 +5,12 @@ executes them); its fit believes what they report, so these tests see the captur
 inside. Real tasks check the captured data in the fit (see tests/hostile for forgery attempts).
 """
 
+import json
 import os
+import subprocess
+import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -21,6 +25,7 @@ from sga_agent.sandbox import (
     looks_secret,
 )
 from sga_agent.task import EvaluationSettings
+from tests.sga_agent import doubles
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DOUBLE = "tests.sga_agent.doubles:ExecTask"
@@ -278,6 +283,61 @@ def test_the_fit_worker_warms_up_once_before_its_first_candidate():
         first, second = pool.map(task, ["loss = 1.0\n", "loss = 2.0\n"], SETTINGS)
     assert first.extras["warmed_with"] == {} == second.extras["warmed_with"]
     assert first.extras["fit_pid"] == second.extras["fit_pid"]
+
+
+def _staged_fit_worker(notes: Path) -> tuple[subprocess.Popen, str]:
+    """A fit worker of StagedWarmingTask, started with one request already waiting."""
+    settings = EvaluationSettings(options={"notes": str(notes)})
+    data = doubles.StagedWarmingTask().capture("loss = 1.0\n")
+    request = json.dumps({"data": data, "settings": asdict(settings)}) + "\n"
+    command = [sys.executable, "-m", "sga_agent.fit_worker",
+               "tests.sga_agent.doubles:StagedWarmingTask", "4096", json.dumps(settings.options)]
+    worker = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                              env=os.environ | {"PYTHONPATH": str(REPO_ROOT)})  # fmt: skip
+    worker.stdin.write(request)  # before the worker has even started Python
+    worker.stdin.flush()
+    assert json.loads(worker.stdout.readline()) == {"ready": True}
+    return worker, request
+
+
+def _noted(notes: Path) -> list[str]:
+    return notes.read_text().split() if notes.exists() else []
+
+
+def test_a_waiting_candidate_goes_before_the_warm_up_stages_that_run_when_idle(tmp_path):
+    notes = tmp_path / "stages"
+    worker, request = _staged_fit_worker(notes)
+    first = json.loads(worker.stdout.readline())
+    deadline = time.monotonic() + 30
+    while _noted(notes) != ["1", "2", "3"]:
+        assert time.monotonic() < deadline, "the warm-up did not run while the worker waited"
+        time.sleep(0.05)
+    worker.stdin.write(request)
+    worker.stdin.flush()
+    second = json.loads(worker.stdout.readline())
+    worker.stdin.close()
+    assert worker.wait(timeout=30) == 0
+    assert first["extras"]["stages_done"] == []
+    assert second["extras"]["stages_done"] == ["1", "2", "3"]
+
+
+def test_warm_up_stages_not_reached_when_the_input_ends_are_skipped(tmp_path):
+    notes = tmp_path / "stages"
+    worker, _ = _staged_fit_worker(notes)
+    worker.stdin.close()
+    assert json.loads(worker.stdout.readline())["extras"]["stages_done"] == []
+    assert worker.wait(timeout=30) == 0
+    assert not notes.exists()
+
+
+def test_a_single_evaluation_warms_up_the_first_stage_only(tmp_path):
+    notes = tmp_path / "stages"
+    settings = EvaluationSettings(options={"notes": str(notes)})
+    evaluation = sandboxed("loss = 1.0\n", settings=settings,
+                           task="tests.sga_agent.doubles:StagedWarmingTask")  # fmt: skip
+    assert evaluation.status == "ok"
+    assert evaluation.extras["stages_done"] in ([], ["1"])
+    assert _noted(notes) in ([], ["1"])  # its helpers are gone: no stage ran after it
 
 
 def test_a_failing_warm_up_leaves_the_evaluations_to_run():

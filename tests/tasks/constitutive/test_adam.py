@@ -50,7 +50,8 @@ from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
 task = load_task("elastic")
 options = {"steps": 200}
-task.warm_up_fit(options)
+for _stage in task.warm_up_fit(options):
+    pass
 data = json.loads(sys.stdin.read())
 result = task.evaluate(data, EvaluationSettings(epochs=2, options=options))
 print(json.dumps({"valid": result.valid, "losses": len(result.curves["loss"]),
