@@ -54,8 +54,9 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -302,21 +303,31 @@ class EvaluationSlot:
         self.one_shot = one_shot
         self._folder = Path(tempfile.mkdtemp(prefix="sga-sandbox-"))
         self._capture: tuple[str, _LineProcess] | None = None
+        self._capture_ready = False
         self._fit: tuple[str, _LineProcess] | None = None
         self._fit_ready = False
         self._stopped = False
 
-    def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def evaluate(
+        self,
+        task: str,
+        solution: str,
+        settings: EvaluationSettings,
+        on_captured: Callable[[str, str], None] | None = None,
+    ) -> Evaluation:
         """Capture then fit one solution; every failure is an invalid Evaluation.
 
         A fit worker that is not running yet is started first, so that it loads while the
-        capture runs.
+        capture runs. ``on_captured(task, options)`` (the options as JSON) is called once the
+        capture step has ended.
         """
         start = time.monotonic()
         request = _settings_json(settings)
         options = json.dumps(request["options"], sort_keys=True)
         self._start_fit_worker(task, options)
         captured = self._captured(task, solution)
+        if on_captured is not None:
+            on_captured(task, options)
         capture_seconds = time.monotonic() - start
         if isinstance(captured, Evaluation):
             evaluation = captured
@@ -326,6 +337,12 @@ class EvaluationSlot:
         evaluation.seconds = time.monotonic() - start
         evaluation.extras.setdefault("capture_seconds", round(capture_seconds, 3))
         return evaluation
+
+    def start_helpers(self, task: str, options: str) -> None:
+        """Start the helpers for ``task`` and ``options`` (JSON) unless they run, without
+        waiting for them: they load, and the fit worker warms up, while others work."""
+        self._start_fit_worker(task, options)
+        self._start_capture_server(task)
 
     def close(self) -> None:
         """Stop the helper processes (letting them exit normally, all at once) and remove
@@ -376,27 +393,42 @@ class EvaluationSlot:
         return _capture_outcome(reply, self.limits, timeout)
 
     def _capture_server(self, task: str) -> _LineProcess:
+        """The capture server for ``task``, started unless it runs, once it has said it is
+        ready."""
+        self._start_capture_server(task)
+        if self._capture is None:
+            raise HelperFailure("the pool was stopped")
+        server = self._capture[1]
+        if not self._capture_ready:
+            try:
+                ready = server.ask(None, START_TIMEOUT_S)
+            except HelperFailure as error:
+                self._capture = None
+                raise HelperFailure(_last_line(server.log_tail()) or str(error)) from None
+            if not ready.get("ready"):
+                self._capture = None
+                server.kill()
+                raise HelperFailure("no ready line")
+            self._capture_ready = True
+        return server
+
+    def _start_capture_server(self, task: str) -> None:
+        """Start a capture server for ``task`` unless one runs; do not wait for it."""
         if self._capture is not None and self._capture[0] == task and self._capture[1].alive:
-            return self._capture[1]
+            return
         if self._capture is not None:
             self._capture[1].kill()
+            self._capture = None
         if self._stopped:
-            raise HelperFailure("the pool was stopped")
+            return
         env = worker_environment(SandboxLimits(threads=1), self.extra_python_path)
         for name in CACHE_VARIABLES:  # a capture needs no cache: it finds none
             env.pop(name, None)
         env["HOME"] = str(self._folder)
         env["PYTHONSAFEPATH"] = "1"  # the working directory is not importable, nor readable
         command = [sys.executable, "-m", "sga_agent.capture_server", task]
-        server = _LineProcess(command, env, self._folder, "capture")
-        try:
-            ready = server.ask(None, START_TIMEOUT_S)
-        except HelperFailure as error:
-            raise HelperFailure(_last_line(server.log_tail()) or str(error)) from None
-        if not ready.get("ready"):
-            raise HelperFailure("no ready line")
-        self._capture = (task, server)
-        return server
+        self._capture = (task, _LineProcess(command, env, self._folder, "capture"))
+        self._capture_ready = False
 
     # ---------------------------------------------------------------------- fit
 
@@ -605,6 +637,9 @@ def evaluate_in_sandbox(
 class SandboxPool:
     """Evaluate candidates concurrently: ``max_workers`` slots, each an :class:`EvaluationSlot`.
 
+    Once the pool's first capture has ended, the slots no evaluation holds start their helpers,
+    which load beside that first fit, so that no slot's first candidate waits for them.
+
     Identical candidates are the caller's to skip: :func:`~sga_agent.fingerprint.fingerprint`
     tells them apart (the search loop evaluates each fingerprint once, across resumes too).
 
@@ -639,6 +674,8 @@ class SandboxPool:
         ]
         for evaluator in self._evaluators:
             self._slots.put(evaluator)
+        self._lock = threading.Lock()
+        self._idle_started = False  # see _start_idle_slots
 
     def isolation(self) -> Isolation:
         """How the capture processes are isolated, for the run's record."""
@@ -696,12 +733,32 @@ class SandboxPool:
     def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
         evaluator = self._slots.get()
         try:
-            return evaluator.evaluate(task, solution, settings)
+            return evaluator.evaluate(task, solution, settings, self._start_idle_slots)
         except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
             reason = f"the sandbox failed: {type(error).__name__}: {error}"
             return Evaluation.invalid(reason, status="error")
         finally:
             self._slots.put(evaluator)
+
+
+    def _start_idle_slots(self, task: str, options: str) -> None:
+        """Start the helpers of the slots no evaluation holds, once: when the pool's first
+        capture has ended, so that they load beside the first fit (fewer processes compete
+        than if every slot started at once) and no slot's first candidate waits for them."""
+        with self._lock:
+            if self._idle_started:
+                return
+            self._idle_started = True
+        idle: list[EvaluationSlot] = []
+        with contextlib.suppress(queue.Empty):
+            while True:
+                idle.append(self._slots.get_nowait())
+        try:
+            for evaluator in idle:
+                evaluator.start_helpers(task, options)
+        finally:
+            for evaluator in idle:
+                self._slots.put(evaluator)
 
 
 def threads_per_worker(workers: int) -> int:

@@ -277,6 +277,15 @@ def test_pool_keeps_its_helpers_warm():
     assert second.extras["capture_seconds"] < first.extras["capture_seconds"]
 
 
+def test_a_pool_starts_its_idle_slots_once_its_first_capture_has_ended():
+    with SandboxPool(2, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        (first,) = pool.map(DOUBLE, ["loss = 1.0\n"], SETTINGS)
+        running = [[helper.alive for helper in slot._helpers()] for slot in pool._evaluators]
+        later = pool.map(DOUBLE, ["loss = 2.0\n", "loss = 3.0\n"], SETTINGS)
+    assert running == [[True, True], [True, True]]  # capture server and fit worker, each slot
+    assert [first.loss] + [evaluation.loss for evaluation in later] == [1.0, 2.0, 3.0]
+
+
 def test_the_fit_worker_warms_up_once_before_its_first_candidate():
     task = "tests.sga_agent.doubles:WarmingTask"
     with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
