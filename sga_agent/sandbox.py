@@ -755,7 +755,10 @@ class SandboxPool:
                 idle.append(self._slots.get_nowait())
         try:
             for evaluator in idle:
-                evaluator.start_helpers(task, options)
+                # a slot that cannot start now (no processes left, say) reports it when it
+                # gets a candidate: the evaluation that triggered this one is not lost
+                with contextlib.suppress(OSError):
+                    evaluator.start_helpers(task, options)
         finally:
             for evaluator in idle:
                 self._slots.put(evaluator)

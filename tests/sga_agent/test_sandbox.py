@@ -286,6 +286,17 @@ def test_a_pool_starts_its_idle_slots_once_its_first_capture_has_ended():
     assert [first.loss] + [evaluation.loss for evaluation in later] == [1.0, 2.0, 3.0]
 
 
+def test_an_idle_slot_that_cannot_start_costs_the_first_evaluation_nothing(monkeypatch):
+    def no_processes(self, task, options):
+        raise OSError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(EvaluationSlot, "start_helpers", no_processes)
+    with SandboxPool(2, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        evaluations = pool.map(DOUBLE, ["loss = 1.0\n"], SETTINGS)
+        evaluations += pool.map(DOUBLE, ["loss = 2.0\n", "loss = 3.0\n"], SETTINGS)
+    assert [evaluation.loss for evaluation in evaluations] == [1.0, 2.0, 3.0]
+
+
 def test_the_fit_worker_warms_up_once_before_its_first_candidate():
     task = "tests.sga_agent.doubles:WarmingTask"
     with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
