@@ -326,9 +326,9 @@ class EvaluationSlot:
         options = json.dumps(request["options"], sort_keys=True)
         self._start_fit_worker(task, options)
         captured = self._captured(task, solution)
+        capture_seconds = time.monotonic() - start
         if on_captured is not None:
             on_captured(task, options)
-        capture_seconds = time.monotonic() - start
         if isinstance(captured, Evaluation):
             evaluation = captured
         else:
@@ -739,7 +739,6 @@ class SandboxPool:
             return Evaluation.invalid(reason, status="error")
         finally:
             self._slots.put(evaluator)
-
 
     def _start_idle_slots(self, task: str, options: str) -> None:
         """Start the helpers of the slots no evaluation holds, once: when the pool's first
