@@ -14,7 +14,10 @@ own numbers are printed. ``--baseline`` adds another checkout of this project (a
 earlier commit) to the rotation, run the same way, with its ratio to ours. The original's driver
 covers elastic and plasticine; our own runs cover every constitutive task. ``--profile`` prints
 where our evaluations' time goes, by torch operation (each Taichi-backed step, SVD, stress or
-product is one), and the time outside any operation. Usage::
+product is one), and the time outside any operation. Every run also times each Taichi kernel
+launch, so the table says where an epoch goes (the step's forward and reverse kernels, the laws'
+kernels, the rest in torch and Python) and, beside the original, the speed-up that our kernels
+alone would allow if everything else took no time. Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
         [--original ~/SGA --original-python ~/orig-venv/bin/python] [--baseline ../before]
@@ -78,6 +81,7 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -
     # compile every kernel, load the ground truth
     evaluator.evaluate(data, EvaluationSettings(epochs=1, options=options))
     settings = EvaluationSettings(epochs=epochs, options=options)
+    clock = KernelClock()
     started = time.perf_counter()
     if profile:
         from torch.profiler import ProfilerActivity
@@ -101,7 +105,48 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -
         "loss": result.loss,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "baseline_mb": baseline_mb,
+        # Taichi's share of each epoch (the last entry is the final forward pass)
+        "kernel_seconds": clock.by_call[:-1],
     }
+
+
+class KernelClock:
+    """Wall time of every Taichi kernel launch (launch cost included), by kernel, per call of
+    the fit's ``trajectory_loss`` (one epoch each). Installed for the rest of the process: the
+    benchmark's child times nothing else."""
+
+    #: Kernel functions and the names the table gives them; any other kernel keeps its own.
+    NAMES = {"step_forward": "step forward", "step_backward": "step reverse", "svd3": "SVD",
+             "svd3_backward": "SVD reverse", "hencky_forward": "Hencky stress",
+             "hencky_backward": "Hencky reverse", "product3": "3x3 products",
+             "product3_backward": "3x3 products reverse"}  # fmt: skip
+
+    def __init__(self) -> None:
+        from taichi.lang.kernel_impl import Kernel
+
+        from tasks.constitutive import inner
+
+        self.totals: dict[str, float] = dict.fromkeys(self.NAMES.values(), 0.0)
+        self.by_call: list[dict[str, float]] = []
+        launch, fitted_loss = Kernel.__call__, inner.trajectory_loss
+
+        def timed_launch(kernel, *args, **kwargs):
+            started = time.perf_counter()
+            try:
+                return launch(kernel, *args, **kwargs)
+            finally:
+                name = self.NAMES.get(kernel.func.__name__, kernel.func.__name__)
+                self.totals[name] = self.totals.get(name, 0.0) + time.perf_counter() - started
+
+        def counted_loss(*args, **kwargs):
+            before = dict(self.totals)
+            try:
+                return fitted_loss(*args, **kwargs)
+            finally:
+                self.by_call.append({k: v - before.get(k, 0.0) for k, v in self.totals.items()})
+
+        Kernel.__call__ = timed_launch
+        inner.trajectory_loss = counted_loss
 
 
 def where_the_time_goes(profiler, seconds: float, epochs: int, rows: int = 25) -> str:
@@ -258,6 +303,29 @@ def main() -> None:
             if impl in medians:
                 print(f"{task:<11} {'':<9} {'':>27} {'':>8} "
                       f"{medians[impl] / medians['ours']:>10.2f}x vs {impl}")  # fmt: skip
+        print(where_an_epoch_goes(task, runs["ours", task], medians.get("original")))
+
+
+def where_an_epoch_goes(task: str, runs: list[dict], original: float | None) -> str:
+    """Our epoch split into Taichi's kernels (launches included) and the rest (torch and
+    Python), medians over all epochs; with the original's median, the speed-up bound that the
+    kernels set (everything else at zero cost)."""
+    rows = [(s, k) for run in runs for s, k in zip(run["epoch_s"], run["row"]["kernel_seconds"],
+                                                     strict=True)]  # fmt: skip
+    names = [name for name in rows[0][1] if any(k.get(name, 0.0) > 0 for _, k in rows)]
+    parts = {name: statistics.median(k.get(name, 0.0) for _, k in rows) for name in names}
+    kernels = [sum(k.values()) for _, k in rows]
+    parts["torch and Python"] = statistics.median(s - t for (s, _), t in zip(rows, kernels,
+                                                                           strict=True))
+    lines = [f"{task:<11} ours, where an epoch goes (medians, s): " + ", ".join(
+        f"{name} {seconds:.3f}" for name, seconds in parts.items()
+    )]  # fmt: skip
+    if original is not None:
+        step = statistics.median(k["step forward"] + k["step reverse"] for _, k in rows)
+        lines.append(f"{task:<11} ours at best, all else free: {original / step:.1f}x with the "
+                     f"step kernels ({step:.3f} s), {original / statistics.median(kernels):.1f}x "
+                     f"with all Taichi kernels ({statistics.median(kernels):.3f} s)")  # fmt: skip
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
