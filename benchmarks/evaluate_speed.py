@@ -119,7 +119,8 @@ class KernelClock:
     NAMES = {"step_forward": "step forward", "step_backward": "step reverse", "svd3": "SVD",
              "svd3_backward": "SVD reverse", "hencky_forward": "Hencky stress",
              "hencky_backward": "Hencky reverse", "product3": "3x3 products",
-             "product3_backward": "3x3 products reverse"}  # fmt: skip
+             "product3_backward": "3x3 products reverse", "compiled_law_forward": "compiled law",
+             "compiled_law_reverse": "its reverse"}  # fmt: skip
 
     def __init__(self) -> None:
         from taichi.lang.kernel_impl import Kernel

@@ -21,7 +21,7 @@ from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
 from taichi_mpm import runtime
-from tasks.constitutive import feedback
+from tasks.constitutive import feedback, law_kernel
 from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
 from tasks.constitutive.inner import (
@@ -159,6 +159,8 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     observed = ground_truth(spec, options.steps)
+    if options.law_kernels:
+        law.use_kernels(law_kernel.kernel_law(law, observed_deformations(observed, dtype)))
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
     if spec.searched == "elastic":
         rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
@@ -182,6 +184,15 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         ]
     )
     return fitted_evaluation(result, text, started)
+
+
+def observed_deformations(observed: Trajectory, dtype: torch.dtype) -> torch.Tensor:
+    """Deformation gradients of the observation (its reset states), to check a compiled law on;
+    near-identity ones where it has none."""
+    if observed.states is not None:
+        return torch.as_tensor(observed.states["F"], dtype=dtype).reshape(-1, 3, 3)
+    noise = torch.randn(1000, 3, 3, generator=torch.Generator().manual_seed(0), dtype=dtype)
+    return torch.eye(3, dtype=dtype) + 0.05 * noise
 
 
 def fitted_evaluation(result: InnerResult, feedback_text: str, started: float) -> Evaluation:

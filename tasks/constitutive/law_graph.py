@@ -36,7 +36,7 @@ from typing import Any
 import torch
 from torch import fx, nn
 
-from bridges import closed_form, linalg, products
+from bridges import closed_form, linalg, products, scalar_law
 from tasks.constitutive import law_ops
 
 FORMAT = law_ops.GRAPH_FORMAT
@@ -136,7 +136,9 @@ class GraphLaw(nn.Module):
 
     Parameters keep the names the law gave them (``named_parameters()`` lists them in the
     captured order). The operations are turned into a ``torch.fx.GraphModule`` whose code is
-    generated from the allowed operations and numeric literals only.
+    generated from the allowed operations and numeric literals only. Once :meth:`use_kernels`
+    has given it the law compiled into Taichi kernels (:mod:`tasks.constitutive.law_kernel`),
+    ``forward`` runs those instead.
     """
 
     def __init__(self, graph: LawGraph, dtype: torch.dtype) -> None:
@@ -147,10 +149,25 @@ class GraphLaw(nn.Module):
         self.graph_constants = holder
         for name, tensor in graph.parameters.items():
             self._add_parameter(name, nn.Parameter(_tensor(tensor, dtype)))
+        object.__setattr__(self, "graph", graph)
+        #: the parameters in the graph's order (``parameters()`` lists a submodule's later)
+        object.__setattr__(self, "graph_parameters",
+                           [self.get_parameter(name) for name in graph.parameters])  # fmt: skip
         object.__setattr__(self, "_graph_module", _compile(self, graph, dtype))
+        object.__setattr__(self, "kernels", None)
 
     def forward(self, F: torch.Tensor) -> torch.Tensor:
+        if self.kernels is not None:
+            return scalar_law.apply_law(F, self.kernels, self.graph_parameters)
         return self._graph_module(F)
+
+    def torch_forward(self, F: torch.Tensor) -> torch.Tensor:
+        """The law computed by torch from its graph, whatever :meth:`use_kernels` set."""
+        return self._graph_module(F)
+
+    def use_kernels(self, kernels: scalar_law.CompiledLaw | None) -> None:
+        """Compute ``forward`` with ``kernels`` (the same law compiled), or torch again (None)."""
+        object.__setattr__(self, "kernels", kernels)
 
     def _add_parameter(self, name: str, parameter: nn.Parameter) -> None:
         *path, leaf = name.split(".")

@@ -15,12 +15,16 @@ class ConstitutiveOptions:
     ``graph_memory_mb``: autograd graph the inner fit may hold at once (default 250 MB): the
     teacher-forced segments of an epoch run in batches as large as fit in it (faster, more
     memory; 1000 particles take about 18 MB per 100-step segment with the elastic laws, 50 MB
-    with the plastic ones)."""
+    with the plastic ones).
+    ``law_kernels``: run a captured law compiled into Taichi kernels, one launch forward and one
+    in reverse a step, where the translation covers its operations and agrees with torch
+    (:mod:`tasks.constitutive.law_kernel`; default true); false keeps every law in torch."""
 
     steps: int | None = None
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     graph_memory_mb: float = 250.0
+    law_kernels: bool = True
 
     def __post_init__(self) -> None:
         if self.steps is not None and self.steps < 1:

@@ -44,14 +44,21 @@ SECRET = Path("/root/.sga-hostile-secret")
 
 
 def cache_digests() -> dict[str, str]:
-    """Content hash of every file in the task caches."""
+    """Content hash of every file in the task caches; of Taichi's index of its kernel cache,
+    only that it is there.
+
+    Taichi rewrites that index (``ticache.tcb``) when a process compiles a kernel, even one it
+    does not cache: the trusted fit compiles a law it runs as Taichi kernels
+    (:mod:`tasks.constitutive.law_kernel`) and writes none of them to the cache. Every kernel
+    file, and the set of files, must stay as they were."""
     home = Path.home() / ".cache"
     roots = [Path(os.environ.get("SGA_CACHE_DIR") or home / "sga"), home / "taichi"]
     digests = {}
     for root in roots:
         for path in sorted(root.rglob("*")) if root.exists() else []:
             if path.is_file():
-                digests[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
+                digests[str(path)] = ("present" if path.name == "ticache.tcb" else
+                                      hashlib.sha256(path.read_bytes()).hexdigest())  # fmt: skip
     return digests
 
 

@@ -1,0 +1,131 @@
+"""A law written as a scalar program runs as Taichi kernels with torch's values and gradients.
+
+Each law is written twice: in torch (batched tensors, autograd) and as a program (arithmetic on
+one particle's :class:`bridges.scalar_law.Scalar` values, element by element of NumPy object
+arrays). In float64 the compiled kernels must reproduce torch's stresses, dL/dF and parameter
+gradients to round-off, including torch's conventions at the edges (a clamp at its bound, abs
+at zero), and pass finite differences.
+"""
+
+import numpy as np
+import pytest
+import torch
+
+from bridges import scalar_law as sl
+
+EYE = torch.eye(3, dtype=torch.float64)
+
+
+def _deformations(count: int = 300, seed: int = 0) -> torch.Tensor:
+    generator = torch.Generator().manual_seed(seed)
+    F = EYE + 0.3 * torch.randn(count, 3, 3, dtype=torch.float64, generator=generator)
+    F[0] = EYE  # abs(0) and a clamp exactly at its bound below
+    F[1] = -F[1]  # inverted
+    return F
+
+
+def _torch_law(F: torch.Tensor, mu: torch.Tensor, lam: torch.Tensor) -> torch.Tensor:
+    J = torch.linalg.det(F)
+    logJ = torch.log(J.abs().clamp(min=1e-3))
+    B = F @ F.mT
+    shear = torch.tanh(B - EYE) * torch.sin(mu) + torch.cos(lam) * (B - EYE).abs()
+    bulk = lam * logJ / (1.0 + J * J) + torch.sqrt(J * J + 1.0) - (J - 1.0).clamp(min=0.0) ** 3
+    trace = torch.diagonal(B, dim1=-2, dim2=-1).sum(-1)
+    gate = torch.where(trace > 3.0, trace - 3.0, torch.zeros_like(trace))
+    return mu * shear + (bulk + gate)[:, None, None] * EYE
+
+
+def _program_law() -> tuple[sl.Program, list]:
+    program = sl.Program(9, 2)
+    F = np.array(program.inputs, dtype=object).reshape(3, 3)
+    mu, lam = program.parameters
+
+    def f(name, *args):
+        return sl.apply(name, *args)
+
+    a, b, c, d, e, g, h, i, k = F.reshape(-1)
+    J = a * (e * k - g * i) + b * (g * h - d * k) + c * (d * i - e * h)
+    magnitude = f("abs", J)
+    logJ = f("log", sl.select(f("lt", magnitude, 1e-3), 1e-3, magnitude))
+    B = F @ F.T
+    strain = B - np.eye(3)
+    shear = np.empty((3, 3), dtype=object)
+    for r in range(3):
+        for s in range(3):
+            shear[r, s] = (f("tanh", strain[r, s]) * f("sin", mu)
+                           + f("cos", lam) * f("abs", strain[r, s]))  # fmt: skip
+    excess = J - 1.0
+    clamped = sl.select(f("lt", excess, 0.0), 0.0, excess)
+    bulk = lam * logJ / (1.0 + J * J) + f("sqrt", J * J + 1.0) - clamped**3
+    trace = B[0, 0] + B[1, 1] + B[2, 2]
+    gate = sl.select(f("gt", trace, 3.0), trace - 3.0, 0.0)
+    out = mu * shear + (bulk + gate) * np.eye(3)
+    return program, list(out.reshape(-1))
+
+
+@pytest.fixture(scope="module")
+def compiled() -> sl.CompiledLaw:
+    program, outputs = _program_law()
+    return sl.CompiledLaw(program, outputs)
+
+
+def test_the_kernels_give_torch_s_stresses_and_gradients(compiled):
+    F = _deformations()
+    mu = torch.tensor(0.7, dtype=torch.float64, requires_grad=True)
+    lam = torch.tensor(1.3, dtype=torch.float64, requires_grad=True)
+    weights = torch.randn(F.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    expected = _torch_law(F.requires_grad_(True), mu, lam)
+    expected_grads = torch.autograd.grad((expected * weights).sum(), [F, mu, lam])
+    F_mine = F.detach().clone().requires_grad_(True)
+    actual = sl.apply_law(F_mine, compiled, [mu, lam])
+    actual_grads = torch.autograd.grad((actual * weights).sum(), [F_mine, mu, lam])
+    torch.testing.assert_close(actual, expected, rtol=1e-10, atol=1e-12)
+    for mine, theirs in zip(actual_grads, expected_grads, strict=True):
+        torch.testing.assert_close(mine, theirs, rtol=1e-10, atol=1e-10)
+
+
+def test_the_kernels_pass_finite_differences(compiled):
+    F = _deformations(count=6, seed=3).requires_grad_(True)
+    mu = torch.tensor(0.7, dtype=torch.float64, requires_grad=True)
+    lam = torch.tensor(1.3, dtype=torch.float64, requires_grad=True)
+    F.data[0] += 0.01  # away from the clamp's kink, where finite differences straddle it
+    assert torch.autograd.gradcheck(lambda F, mu, lam: sl.apply_law(F, compiled, [mu, lam]),
+                                    (F, mu, lam), eps=1e-6, atol=1e-6)  # fmt: skip
+
+
+def test_a_parameter_only_compared_gets_no_gradient_as_in_torch():
+    program = sl.Program(9, 2)
+    scale, threshold = program.parameters
+    F = program.inputs
+    outputs = [sl.select(sl.apply("gt", x, threshold), scale * x, x) for x in F]
+    law = sl.CompiledLaw(program, outputs)
+    assert law.constant_zero == [False, True]
+    parameters = [torch.tensor(2.0, dtype=torch.float64, requires_grad=True),
+                  torch.tensor(1.0, dtype=torch.float64, requires_grad=True)]  # fmt: skip
+    stress = sl.apply_law(_deformations(count=4), law, parameters)
+    grads = torch.autograd.grad(stress.sum(), parameters, allow_unused=True)
+    assert grads[0] is not None and grads[1] is None
+
+
+def test_a_law_without_parameters_and_constant_outputs():
+    program = sl.Program(9, 0)
+    outputs = [x * 2.0 for x in program.inputs[:8]] + [1.5]
+    law = sl.CompiledLaw(program, outputs)
+    F = _deformations(count=5).requires_grad_(True)
+    stress = sl.apply_law(F, law, [])
+    expected = torch.cat([2.0 * F.detach().reshape(5, 9)[:, :8],
+                          torch.full((5, 1), 1.5, dtype=torch.float64)], 1)  # fmt: skip
+    torch.testing.assert_close(stress.reshape(5, 9), expected)
+    (grad,) = torch.autograd.grad(stress.sum(), [F])
+    assert torch.equal(grad.reshape(5, 9)[:, :8], torch.full((5, 8), 2.0, dtype=torch.float64))
+    assert torch.equal(grad.reshape(5, 9)[:, 8], torch.zeros(5, dtype=torch.float64))
+
+
+def test_constants_fold_and_equal_operations_are_made_once():
+    program = sl.Program(9, 0)
+    x = program.inputs[0]
+    assert sl.apply("add", 2.0, 3.0) == 5.0
+    assert (x + 1.0) is (x + 1.0)
+    assert x * 1.0 is x and x + 0.0 is x
+    with pytest.raises(TypeError, match="no truth value"):
+        bool(x > 0.0)
