@@ -9,13 +9,14 @@ then run as one Taichi launch over all particles forward and one in reverse:
 
 * the reverse is derived from the program (reverse-mode differentiation, with torch's
   conventions at the edges: ``clamp`` passes the gradient at its bounds, ``abs`` has
-  gradient 0 at 0), and recomputes the forward values it needs, so nothing but the law's
-  input is kept between the two;
+  gradient 0 at 0, an SVD's is :mod:`bridges.linalg`'s clamped one) and recomputes the
+  forward values it needs, so only the law's input and its SVDs' values are kept between the
+  two;
 * parameter gradients are written per particle and summed by torch (no atomics).
 
-:class:`CompiledLaw` wraps the two kernels as a ``torch.autograd.Function``. Which laws can be
-written as a program is the caller's business (:mod:`tasks.constitutive.law_kernel` translates
-a captured law graph).
+:class:`CompiledLaw` holds the two kernels and :func:`apply_law` runs them as a differentiable
+torch operation. Which laws can be written as a program is the caller's business
+(:mod:`tasks.constitutive.law_kernel` translates a captured law graph).
 """
 
 from __future__ import annotations
@@ -37,10 +38,10 @@ ARITY = {"add": 2, "sub": 2, "mul": 2, "div": 2, "neg": 1, "powc": 2, "exp": 1, 
          "sqrt": 1, "sin": 1, "cos": 1, "tanh": 1, "abs": 1, "sign": 1, "select": 3, "lt": 2,
          "le": 2, "gt": 2, "ge": 2, "eq": 2, "ne": 2, "and": 2, "or": 2, "svd": 10,
          "svd_saved": 11, "part": 2}  # fmt: skip
-_COMPARISONS = {"lt": "__lt__", "le": "__le__", "gt": "__gt__", "ge": "__ge__", "eq": "__eq__",
-                "ne": "__ne__"}  # fmt: skip
+_COMPARISONS = frozenset({"lt", "le", "gt", "ge", "eq", "ne"})
 #: Most nodes a program may have (forward and reverse): Taichi's compile time grows with it.
 MAX_NODES = 20_000
+
 
 class ProgramTooLarge(ValueError):
     """The program outgrew :data:`MAX_NODES`."""
@@ -65,6 +66,8 @@ class Program:
 
     def op(self, name: str, *args: Scalar | float) -> Scalar | float:
         """The node ``name(*args)`` (made once), or its value if every argument is a constant."""
+        if ARITY.get(name) != len(args):
+            raise ValueError(f"{name} takes {ARITY.get(name)} arguments, got {len(args)}")
         plain = tuple(a.index if isinstance(a, Scalar) else ("c", float(a)) for a in args)
         if all(isinstance(a, tuple) for a in plain):
             return _fold(name, [float(a) for a in args])

@@ -159,8 +159,9 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     observed = ground_truth(spec, options.steps)
-    if options.law_kernels:
-        law.use_kernels(law_kernel.kernel_law(law, observed_deformations(observed, dtype)))
+    if options.law_kernels != "none":
+        F = observed_deformations(observed, dtype)
+        law.use_kernels(law_kernel.kernel_law(law, F, svd=options.law_kernels == "all"))
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
     if spec.searched == "elastic":
         rollout = Rollout(scene, torch_laws.NoPlasticity(), law)

@@ -39,9 +39,10 @@ class Untranslatable(ValueError):
     """The graph uses something :func:`translate` does not write out."""
 
 
-def translate(graph: LawGraph, dtype: torch.dtype) -> tuple[sl.Program, list]:
+def translate(graph: LawGraph, dtype: torch.dtype, svd: bool = True) -> tuple[sl.Program, list]:
     """(program, its 9 outputs): the law for one particle, parameters in the graph's order,
-    for the floats of ``dtype`` (an SVD's gradient clamp depends on them)."""
+    for the floats of ``dtype`` (an SVD's gradient clamp depends on them); with ``svd``
+    false, a graph with an SVD is :class:`Untranslatable`."""
     sizes = [math.prod(t.shape) for t in graph.parameters.values()]
     program = sl.Program(9, sum(sizes))
     values: dict[str, list] = {"input": [_array(program.inputs).reshape(1, 3, 3)]}
@@ -66,7 +67,8 @@ def translate(graph: LawGraph, dtype: torch.dtype) -> tuple[sl.Program, list]:
             return None  # dtype, device, layout, memory format: floats only here
         return value
 
-    rules = RULES | {"aten._linalg_svd.default": partial(_svd, tolerance=_svd_tolerance(dtype))}
+    rules = RULES | ({"aten._linalg_svd.default": partial(_svd, tolerance=_svd_tolerance(dtype))}
+                     if svd else {})  # fmt: skip
     for op, args, kwargs in graph.nodes:
         rule = rules.get(op)
         if rule is None:
@@ -86,12 +88,13 @@ def translate(graph: LawGraph, dtype: torch.dtype) -> tuple[sl.Program, list]:
     return program, list(out.reshape(-1))
 
 
-def kernel_law(law: GraphLaw, F: torch.Tensor) -> sl.CompiledLaw | None:
+def kernel_law(law: GraphLaw, F: torch.Tensor, svd: bool = False) -> sl.CompiledLaw | None:
     """The compiled kernels of ``law`` if they compute what its torch graph computes on the
-    deformation gradients ``F`` (N, 3, 3) and their neighbourhood, else None."""
+    deformation gradients ``F`` (N, 3, 3) and their neighbourhood, else None; a law with an SVD
+    only with ``svd`` (its kernels take longer to compile: see the task option
+    ``law_kernels``)."""
     try:
-        program, outputs = translate(law.graph, law.graph_parameters[0].dtype
-                                     if law.graph_parameters else F.dtype)
+        program, outputs = translate(law.graph, F.dtype, svd)
         compiled = sl.CompiledLaw(program, outputs)
     except (Untranslatable, sl.ProgramTooLarge):
         return None

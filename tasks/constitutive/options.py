@@ -16,15 +16,17 @@ class ConstitutiveOptions:
     teacher-forced segments of an epoch run in batches as large as fit in it (faster, more
     memory; 1000 particles take about 18 MB per 100-step segment with the elastic laws, 50 MB
     with the plastic ones).
-    ``law_kernels``: run a captured law compiled into Taichi kernels, one launch forward and one
-    in reverse a step, where the translation covers its operations and agrees with torch
-    (:mod:`tasks.constitutive.law_kernel`; default true); false keeps every law in torch."""
+    ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
+    and one in reverse a step, where the translation covers their operations and agrees with
+    torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD,
+    ``all`` those with one too (compiling the SVD costs a second or more per law, which a
+    plastic law's epochs did not win back here), ``none`` keeps every law in torch."""
 
     steps: int | None = None
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     graph_memory_mb: float = 250.0
-    law_kernels: bool = True
+    law_kernels: Literal["no-svd", "all", "none"] = "no-svd"
 
     def __post_init__(self) -> None:
         if self.steps is not None and self.steps < 1:
