@@ -30,7 +30,7 @@ import taichi as ti
 import torch
 from taichi.lang import impl
 
-from taichi_mpm import runtime
+from bridges.step import torch_dtype
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 
 #: Operations of a program: name -> number of arguments.
@@ -38,7 +38,6 @@ ARITY = {"add": 2, "sub": 2, "mul": 2, "div": 2, "neg": 1, "powc": 2, "exp": 1, 
          "sqrt": 1, "sin": 1, "cos": 1, "tanh": 1, "abs": 1, "sign": 1, "select": 3, "lt": 2,
          "le": 2, "gt": 2, "ge": 2, "eq": 2, "ne": 2, "and": 2, "or": 2, "svd": 10,
          "svd_saved": 11, "part": 2}  # fmt: skip
-_COMPARISONS = frozenset({"lt", "le", "gt", "ge", "eq", "ne"})
 #: Most nodes a program may have (forward and reverse): Taichi's compile time grows with it.
 MAX_NODES = 20_000
 
@@ -88,7 +87,8 @@ class Program:
             if isinstance(output, Scalar):
                 adjoint[output.index] = _plus(adjoint.get(output.index), seed)
         parts: dict[int, list] = {}  # an SVD's node: the adjoints of its 21 values
-        for index in range(len(self.nodes) - 1, -1, -1):
+        leaves = len(self.inputs) + len(self.parameters)  # the first nodes; their adjoints stay
+        for index in range(len(self.nodes) - 1, leaves - 1, -1):
             g = adjoint.pop(index, None)
             name, args = self.nodes[index]
             if name == "part" and g is not None:
@@ -102,9 +102,7 @@ class Program:
                     if isinstance(argument, Scalar) and not _is(local, 0.0):
                         adjoint[argument.index] = _plus(adjoint.get(argument.index), local)
                 continue
-            if g is None or name in ("input", "param") or name in _COMPARISONS:
-                if name in ("input", "param") and g is not None:
-                    adjoint[index] = g  # kept for the answer
+            if g is None:
                 continue
             values = [self._value(a) for a in args]
             for position, local in _local_gradients(self, name, values, Scalar(self, index), g):
@@ -305,7 +303,7 @@ def _local_gradients(program: Program, name: str, a: list, out: Scalar, g):
         return [(0, g * apply("sign", a[0]))]
     if name == "select":
         return [(1, select(a[0], g, 0.0)), (2, select(a[0], 0.0, g))]
-    return []  # sign, and, or: constant almost everywhere
+    return []  # comparisons, sign, and, or: constant almost everywhere
 
 
 def svd(entries: Sequence[Scalar | float], tolerance: float) -> list[Scalar | float]:
@@ -486,7 +484,6 @@ class CompiledLaw:
                                 "compiled_law_forward")  # fmt: skip
         self._reverse = _kernel(reverse, grads, first + self.saved, self.parameters,
                                 "compiled_law_reverse")  # fmt: skip
-        self.nodes = len(program.nodes) + len(reverse.nodes)
         _compile(self._forward, self.inputs, self.parameters, self.outputs + self.saved)
         _compile(self._reverse, first + self.saved, self.parameters, self.inputs + self.parameters)
 
@@ -573,7 +570,7 @@ def _compile(kernel, width: int, parameters: int, outputs: int) -> None:
     be: it runs once, while compiling). Its offline cache is for the simulator's own kernels:
     a law's kernels are compiled for the law at hand, so none is written to disk (a search
     would otherwise add two files to the user's cache per candidate)."""
-    dtype = torch.float64 if runtime.current().dtype == ti.f64 else torch.float32
+    dtype = torch_dtype()
     config = impl.current_cfg()
     cached, config.offline_cache = config.offline_cache, False
     try:
@@ -625,11 +622,9 @@ class _LawFunction(torch.autograd.Function):
         law: CompiledLaw = ctx.law
         grad_rows, grad_flat = law.backward(rows, flat, saved,
                                             grad.reshape(rows.shape[0], -1))  # fmt: skip
-        pieces: list[torch.Tensor | None] = []
-        start = 0
-        for index, p in enumerate(parameters):
-            used = not all(law.constant_zero[start : start + p.numel()])
-            piece = grad_flat[start : start + p.numel()].reshape(p.shape).to(p.dtype)
-            pieces.append(piece if used and ctx.needs_input_grad[2 + index] else None)
-            start += p.numel()
-        return (grad_rows.reshape(ctx.shape), None, *pieces)
+        pieces = split_parameters(grad_flat, parameters)
+        unused = split_parameters(torch.tensor(law.constant_zero), parameters)
+        return (grad_rows.reshape(ctx.shape), None, *[
+            None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
+            for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
+        ])

@@ -4,8 +4,8 @@
 particle's law as a :class:`bridges.scalar_law.Program`: every tensor of the graph becomes a NumPy
 array of the program's scalars with the graph's shape, the batch dimension of size 1 (a
 constitutive law maps each particle on its own), and every operation the array operation that
-computes the same values. Operations with no such translation here (an SVD, say) leave the law
-to torch: :func:`translate` raises :class:`Untranslatable`.
+computes the same values. Operations with no such translation here (an einsum, say; an SVD
+unless asked for) leave the law to torch: :func:`translate` raises :class:`Untranslatable`.
 
 :func:`kernel_law` translates, compiles and checks: on the observed deformation gradients, the
 kernels must give the torch graph's stresses and gradients (the law's parameters and F), and
@@ -209,23 +209,11 @@ def _div(a, b, rounding_mode=None):
 
 
 def _clamp(x, min=None, max=None):  # noqa: A002 - ATen's names
-    def one(value, low, high):
-        if low is not None:
-            value = sl.select(sl.apply("lt", value, low), low, value)
-        if high is not None:
-            value = sl.select(sl.apply("gt", value, high), high, value)
-        return value
-
-    low = None if min is None else _tensor(min)
-    high = None if max is None else _tensor(max)
-    parts = [x] + [v for v in (low, high) if v is not None]
-
-    def each(*a):
-        rest = list(a[1:])
-        return one(a[0], rest.pop(0) if low is not None else None,
-                   rest.pop(0) if high is not None else None)  # fmt: skip
-
-    return _elementwise(each, *parts)
+    if min is not None:
+        x = _elementwise(lambda v, low: sl.select(sl.apply("lt", v, low), low, v), x, min)
+    if max is not None:
+        x = _elementwise(lambda v, high: sl.select(sl.apply("gt", v, high), high, v), x, max)
+    return _tensor(x)
 
 
 def _relu(x):
@@ -264,13 +252,18 @@ def _sum(x, dims=None, keepdim=False):
     flat = moved.reshape(*moved.shape[: moved.ndim - len(axes)], -1)
     out = _allocated(flat.shape[:-1])
     for index in np.ndindex(out.shape):
-        total: Any = 0.0
-        for item in flat[index]:
-            total = sl.apply("add", total, item)
-        out[index] = total
+        out[index] = _total(flat[index])
     if keepdim:
         out = np.expand_dims(out, axes)
     return out
+
+
+def _total(items: Any) -> Any:
+    """The sum of ``items``, added in order (as a reduction adds them)."""
+    total: Any = 0.0
+    for item in items:
+        total = sl.apply("add", total, item)
+    return total
 
 
 def _mean(x, dims=None, keepdim=False):
@@ -290,9 +283,7 @@ def _softmax(x, dim, half_to_float=False):
         for item in row[1:]:
             top = sl.select(sl.apply("gt", item, top), item, top)
         exps = [sl.apply("exp", sl.apply("sub", item, top)) for item in row]
-        total: Any = 0.0
-        for e in exps:
-            total = sl.apply("add", total, e)
+        total = _total(exps)
         out[index] = [sl.apply("div", e, total) for e in exps]
     return np.moveaxis(out, -1, axis)
 
