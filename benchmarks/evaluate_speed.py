@@ -21,7 +21,10 @@ alone would allow if everything else took no time. Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
         [--original ~/SGA --original-python ~/orig-venv/bin/python] [--baseline ../before]
-        [--profile]
+        [--profile] [--busy-core]
+
+``--busy-core`` runs every configuration twice per round, alone and beside another process
+spinning on one core (``python -c "while True: pass"``), and prints each one's slowdown.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ from sga_agent.sandbox import threads_per_worker  # noqa: E402
 
 ORIGINAL_DRIVER = Path(__file__).resolve().parent / "original_sga.py"
 ORIGINAL_TASKS = ("elastic", "plasticine")  # what the original's driver runs
+#: Environment variables that set a fit worker's threads.
+THREAD_VARIABLES = ("OMP_", "MKL_", "OPENBLAS_", "TI_CPU_MAX_NUM_THREADS")
 
 
 def law_code(task: str) -> str:
@@ -193,13 +198,44 @@ def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
     if profile:
         command.append("--profile")
     path = os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")])
-    env = os.environ | {"OMP_NUM_THREADS": str(threads), "TI_CPU_MAX_NUM_THREADS": str(threads),
-                        "PYTHONPATH": path}  # fmt: skip
+    env = os.environ | fit_threads(tree, threads) | {"PYTHONPATH": path}
     out = subprocess.run(command, capture_output=True, text=True, check=True, env=env, cwd=tree)
     if profile:
         print(out.stderr)
     row = json.loads(out.stdout.strip().splitlines()[-1])
     return {"epoch_s": row["epoch_seconds"], "peak_mb": row["peak_mb"], "row": row}
+
+
+def fit_threads(tree: Path, threads: int) -> dict[str, str]:
+    """The thread settings that checkout ``tree``'s sandbox gives a fit worker with ``threads``
+    threads (its own ``worker_environment``), so each commit runs as its evaluate would."""
+    code = ("import json, sys; from sga_agent.sandbox import SandboxLimits, worker_environment; "
+            "env = worker_environment(SandboxLimits(threads=int(sys.argv[1]))); "
+            "print(json.dumps({k: v for k, v in env.items() if k.startswith(THREAD_VARIABLES)}))"
+            ).replace("THREAD_VARIABLES", repr(THREAD_VARIABLES))  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code, str(threads)], capture_output=True,
+                         text=True, check=True, cwd=tree,
+                         env=os.environ | {"PYTHONPATH": str(tree)})  # fmt: skip
+    return json.loads(out.stdout)
+
+
+class BusyCore:
+    """Another process spinning on one core for as long as the block lasts (--busy-core)."""
+
+    def __init__(self, active: bool) -> None:
+        self.active = active
+        self._process: subprocess.Popen | None = None
+
+    def __enter__(self) -> BusyCore:
+        if self.active:
+            self._process = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            time.sleep(0.5)  # it is spinning before the timed process starts
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._process is not None:
+            self._process.kill()
+            self._process.wait()
 
 
 def run_original(task: str, epochs: int, args: argparse.Namespace) -> dict:
@@ -248,10 +284,14 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true",
                         help="where our evaluation's time goes, by torch operation")  # fmt: skip
     parser.add_argument("--threads", type=int, default=threads_per_worker(1),
-                        help="our threads (torch and Taichi); default: what sga-agent evaluate "
-                        "gives one evaluation, the machine's cores")  # fmt: skip
+                        help="our thread budget, spent as each checkout's sandbox spends it; "
+                        "default: what sga-agent evaluate gives one evaluation, the machine's "
+                        "cores")  # fmt: skip
     parser.add_argument("--graph-memory-mb", type=float,
                         help="our task option graph_memory_mb (default: the task's)")  # fmt: skip
+    parser.add_argument("--busy-core", action="store_true",
+                        help="run everything twice per round, alone and beside another process "
+                        "spinning on one core")  # fmt: skip
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--graph", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -269,42 +309,54 @@ def main() -> None:
     for task in args.tasks:  # fills Taichi's kernel cache and the ground truth: no round compiles
         for tree in trees.values():
             run_ours(task, 1, False, args.threads, graphs[task], args.graph_memory_mb, tree)
+    conditions = ("alone", "busy") if args.busy_core else ("alone",)
     load_before = os.getloadavg()
     started = time.perf_counter()
-    runs: dict[tuple[str, str], list[dict]] = {}
+    runs: dict[tuple[str, str, str], list[dict]] = {}
     for round_index in range(args.rounds):
         for task in args.tasks:
-            for impl, tree in trees.items():
-                run = run_ours(task, args.epochs, args.profile, args.threads, graphs[task],
-                               args.graph_memory_mb, tree)  # fmt: skip
-                runs.setdefault((impl, task), []).append(run)
-            if args.original:
-                runs.setdefault(("original", task), []).append(
-                    run_original(task, args.epochs, args)
-                )
+            for condition in conditions:
+                for impl, tree in trees.items():
+                    with BusyCore(condition == "busy"):
+                        run = run_ours(task, args.epochs, args.profile, args.threads,
+                                       graphs[task], args.graph_memory_mb, tree)  # fmt: skip
+                    runs.setdefault((impl, task, condition), []).append(run)
+                if args.original:
+                    with BusyCore(condition == "busy"):
+                        run = run_original(task, args.epochs, args)
+                    runs.setdefault(("original", task, condition), []).append(run)
             print(f"round {round_index + 1}/{args.rounds} {task}: done", file=sys.stderr)
     load_after = os.getloadavg()
     print(f"{os.cpu_count()} cores; load average (1/5/15 min) before "
           f"{'/'.join(f'{x:.2f}' for x in load_before)}, after "
           f"{'/'.join(f'{x:.2f}' for x in load_after)}; {time.perf_counter() - started:.0f} s; "
-          f"{args.rounds} rounds x {args.epochs} epochs; ours on {args.threads} thread(s), "
-          "the original on 1")  # fmt: skip
-    print(f"{'task':<11} {'impl':<9} {'s/epoch min / median / max':>27} {'peak MB':>8} "
-          f"{'ours faster (medians)':>22}")  # fmt: skip
+          f"{args.rounds} rounds x {args.epochs} epochs; ours with a budget of {args.threads} "
+          "thread(s), the original on 1"
+          + ("; 'busy': beside a process spinning on one core" if args.busy_core else ""))
+    print(f"{'task':<11} {'impl':<9} {'load':<6} {'s/epoch min / median / max':>27} "
+          f"{'peak MB':>8} {'ours faster (medians)':>22}")  # fmt: skip
     for task in args.tasks:
         medians = {}
-        for impl in ("original", "baseline", "ours"):
-            if (impl, task) not in runs:
-                continue
-            epochs = [s for run in runs[impl, task] for s in run["epoch_s"]]
-            peak = max(run["peak_mb"] for run in runs[impl, task])
-            medians[impl] = statistics.median(epochs)
-            print(f"{task:<11} {impl:<9} {spread(epochs):>27} {peak:8.0f}")
-        for impl in ("original", "baseline"):
-            if impl in medians:
-                print(f"{task:<11} {'':<9} {'':>27} {'':>8} "
-                      f"{medians[impl] / medians['ours']:>10.2f}x vs {impl}")  # fmt: skip
-        print(where_an_epoch_goes(task, runs["ours", task], medians.get("original")))
+        for condition in conditions:
+            for impl in ("original", "baseline", "ours"):
+                if (impl, task, condition) not in runs:
+                    continue
+                epochs = [s for run in runs[impl, task, condition] for s in run["epoch_s"]]
+                peak = max(run["peak_mb"] for run in runs[impl, task, condition])
+                medians[impl, condition] = statistics.median(epochs)
+                print(f"{task:<11} {impl:<9} {condition:<6} {spread(epochs):>27} {peak:8.0f}")
+            for impl in ("original", "baseline"):
+                if (impl, condition) in medians:
+                    ratio = medians[impl, condition] / medians["ours", condition]
+                    print(f"{task:<11} {'':<9} {condition:<6} {'':>27} {'':>8} "
+                          f"{ratio:>10.2f}x vs {impl}")  # fmt: skip
+        if args.busy_core:
+            for impl in ("original", "baseline", "ours"):
+                if (impl, "busy") in medians:
+                    slowdown = medians[impl, "busy"] / medians[impl, "alone"]
+                    print(f"{task:<11} {impl:<9} busy / alone: {slowdown:.2f}x")
+        print(where_an_epoch_goes(task, runs["ours", task, "alone"],
+                                  medians.get(("original", "alone"))))  # fmt: skip
 
 
 def where_an_epoch_goes(task: str, runs: list[dict], original: float | None) -> str:

@@ -49,8 +49,9 @@ class Transfer:
     scene : taichi_mpm.Scene
         Grid, time step, walls, particle mass and volume (its initial state is not used).
     parallel : bool, optional
-        Parallel loops; by default from ``PARALLEL_MIN_PARTICLES`` particles (all copies')
-        on a CPU with more than one Taichi thread, always on a GPU.
+        Parallel loops; by default decided before each launch: from ``PARALLEL_MIN_PARTICLES``
+        particles (all copies') on a CPU with more than one Taichi thread while other processes
+        leave a core for each (:func:`taichi_mpm.runtime.parallel_worthwhile`), always on a GPU.
     batch : int
         Independent copies of the scene stepped at once, each on its own grid: the tensors of a
         step hold ``batch * N`` particles, copy b in rows ``b * N`` to ``(b + 1) * N - 1``.
@@ -63,11 +64,7 @@ class Transfer:
         self.scene = scene
         self.batch = batch
         self.dtype = torch_dtype()
-        if parallel is None:
-            parallel = runtime.parallel_worthwhile(
-                batch * scene.num_particles, PARALLEL_MIN_PARTICLES
-            )
-        self._serial = not parallel
+        self._parallel = parallel
         n = scene.grid_resolution
         vec = ti.types.vector(3, info.dtype)
 
@@ -90,6 +87,13 @@ class Transfer:
     def num_particles(self) -> int:
         """Particles of one step: all copies'."""
         return self.batch * self.scene.num_particles
+
+    @property
+    def _serial(self) -> bool:
+        """Whether the next launch loops serially (asked anew each launch by default)."""
+        if self._parallel is not None:
+            return not self._parallel
+        return not runtime.parallel_worthwhile(self.num_particles, PARALLEL_MIN_PARTICLES)
 
     def _grids(self):
         return self.grid_mass, self.grid_momentum, self.grid_velocity

@@ -118,11 +118,14 @@ class SandboxLimits:
     file_size_mb : int
         Largest file the capture process may write, in MiB (it may write none anyway).
     threads : int
-        Threads of the fit's numerical libraries (OpenMP, torch, Taichi's CPU backend); the
-        capture runs on one. Searches and ``sga-agent evaluate`` give each evaluation the
-        machine's cores divided by the evaluations running at once
-        (:func:`threads_per_worker`), set when its fit worker starts. The CPU-time limit of a
-        capture is ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
+        Threads of Taichi's parallel loops in the fit; torch, OpenMP and BLAS run on one
+        (their operations on an evaluation's tensors are too small to share), and so does the
+        capture. A parallel loop runs only while other processes leave a core for each thread
+        (:func:`taichi_mpm.runtime.parallel_worthwhile`), so a busy machine does not stall it.
+        Searches and ``sga-agent evaluate`` give each evaluation the machine's cores divided
+        by the evaluations running at once (:func:`threads_per_worker`), set when its fit
+        worker starts. The CPU-time limit of a capture is
+        ``CPU_TIME_FACTOR * timeout_s * threads + CPU_TIME_MARGIN_S``.
     isolation : bool
         Confine the capture process as :mod:`sga_agent.isolation` describes. Turn it off only
         to debug a task: candidate code then runs with the search's user and files.
@@ -777,10 +780,14 @@ def worker_environment(
         for name, value in os.environ.items()
         if (name in KEPT_VARIABLES or name.startswith(KEPT_PREFIXES)) and not looks_secret(name)
     }
-    threads = str(limits.threads)
+    # torch and BLAS compute on the calling thread: an evaluation's tensors are small, and a
+    # pool's threads that spin or sleep between operations lose their core to any busy process
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        env[name] = threads
-    env["TI_CPU_MAX_NUM_THREADS"] = threads
+        env[name] = "1"
+    env["OMP_WAIT_POLICY"] = "PASSIVE"
+    # Taichi's parallel loops take the thread budget, each launch only while the cores are free
+    # (taichi_mpm.runtime.parallel_worthwhile)
+    env["TI_CPU_MAX_NUM_THREADS"] = str(limits.threads)
     env["TI_SKIP_VERSION_CHECK"] = "ON"  # else ti.init posts to taichi.graphics from a thread
     env["PYTHONUNBUFFERED"] = "1"  # the last lines before a crash reach the log
     env["PYTHONFAULTHANDLER"] = "1"  # a Python traceback for a fatal signal, in the log

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import taichi as ti
 
+from taichi_mpm.spare_cores import SpareCores
+
 _ARCHS = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "gpu": ti.gpu}
 _PRECISIONS = {"float32": ti.f32, "float64": ti.f64}
 
@@ -40,6 +42,7 @@ class RuntimeInfo:
 
 
 _current: RuntimeInfo | None = None
+_spare_cores: SpareCores | None = None
 
 #: Loops over at least this many items are worth running in parallel when Taichi has more
 #: than one CPU thread (on smaller ones, waking the threads costs more than it saves).
@@ -101,7 +104,17 @@ def current() -> RuntimeInfo:
 
 
 def parallel_worthwhile(items: int, minimum: int = PARALLEL_MIN_ITEMS) -> bool:
-    """Whether a loop over ``items`` particles should run in parallel on this runtime: always
-    on a GPU, on a CPU from ``minimum`` items when Taichi has more than one thread."""
+    """Whether a loop over ``items`` particles should run in parallel on this runtime, now:
+    always on a GPU; on a CPU from ``minimum`` items when Taichi has more than one thread and
+    other processes leave a core for each of them (:class:`~taichi_mpm.spare_cores.SpareCores`;
+    a parallel loop waits for its slowest thread, and a thread that shares a busy core is late
+    by a time slice). Ask again before each launch: the answer follows the machine's load."""
+    global _spare_cores
     info = current()
-    return info.arch != "cpu" or (info.threads > 1 and items >= minimum)
+    if info.arch != "cpu":
+        return True
+    if info.threads <= 1 or items < minimum:
+        return False
+    if _spare_cores is None:
+        _spare_cores = SpareCores()
+    return _spare_cores.allow(info.threads)

@@ -147,6 +147,7 @@ def test_environment_is_scrubbed(monkeypatch):
     assert not {"FAKE_API_KEY", "TI_FAKE_TOKEN", "SGA_UNRELATED", "SGA_CACHE_DIR"} & set(environ)
     assert environ["HOME"] != os.environ["HOME"]  # the capture is not told where caches are
     assert environ["OMP_NUM_THREADS"] == environ["TI_CPU_MAX_NUM_THREADS"] == "1"
+    assert environ["OMP_WAIT_POLICY"] == "PASSIVE"
     assert environ["PYTHONPATH"].split(os.pathsep)[0] == str(REPO_ROOT)
 
 
@@ -432,3 +433,10 @@ def test_unserialisable_settings_are_a_caller_error():
 def test_limits_are_validated(kwargs, error, message):
     with pytest.raises(error, match=message):
         SandboxLimits(**kwargs)
+
+
+def test_fit_threads_go_to_taichi_and_torch_runs_on_one():
+    environ = sandbox.worker_environment(SandboxLimits(threads=4))
+    assert environ["TI_CPU_MAX_NUM_THREADS"] == "4"
+    assert environ["OMP_NUM_THREADS"] == environ["MKL_NUM_THREADS"] == "1"
+    assert environ["OMP_WAIT_POLICY"] == "PASSIVE"  # no OpenMP thread spins for a core
