@@ -30,13 +30,43 @@ def default(name: str) -> Any:
     return found.default
 
 
+class SearchCommand(click.Command):
+    """``search``, whose usage error for ``--resume`` names the command that resumes (click
+    alone would suggest the closest option, ``--preset``)."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        given = list(args)  # click consumes ``args``
+        try:
+            return super().parse_args(ctx, args)
+        except click.NoSuchOption as error:
+            if error.option_name != "--resume":
+                raise
+            raise click.UsageError(
+                f"search has no --resume option: `sga-agent resume {resumed_folder(given)}` "
+                "continues a stopped run", ctx
+            ) from None  # fmt: skip
+
+
+def resumed_folder(args: list[str]) -> str:
+    """The folder given with ``--resume`` (``--resume DIR`` or ``--resume=DIR``), else
+    ``RUN_DIR``."""
+    for i, arg in enumerate(args):
+        name, sep, value = arg.partition("=")
+        if name == "--resume":
+            if sep:
+                return value or "RUN_DIR"
+            follows = args[i + 1] if i + 1 < len(args) else ""
+            return follows if follows and not follows.startswith("-") else "RUN_DIR"
+    return "RUN_DIR"
+
+
 def from_preset(name: str) -> str:
     """How a preset-dependent default reads in the help: "5 (sga), 4 (quick)"."""
     return f"{PRESETS['sga'][name]} (sga), {PRESETS['quick'][name]} (quick)"
 
 
 # fmt: off
-@main.command()
+@main.command(cls=SearchCommand)
 @click.option("--task", "task", required=True, callback=registered_task, metavar="NAME",
               help="Registered task (see `sga-agent tasks`).")
 @click.option("--model", metavar="PROVIDER/MODEL", envvar="SGA_MODEL",
@@ -113,13 +143,9 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
     """  # fmt: skip
     if model and replay:
         raise click.UsageError("give either --model or --replay, not both")
-    if not model and not replay:
+    builtin = not model and not replay
+    if builtin:
         model = runner.BUILTIN
-        click.echo(
-            "no --model: the task's built-in LLM-free proposer searches (preset quick); "
-            "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
-            err=True,
-        )
     task = registry.load_task(settings["task"])
     settings["task_options"] = typed_task_options(task, settings["task_options"])
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
@@ -136,6 +162,12 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
         raise click.UsageError(str(error)) from error
     check_executor(config)
     chosen = make_proposer(config)
+    if builtin:  # after every usage error
+        click.echo(
+            "no --model: the task's built-in LLM-free proposer searches (preset quick); "
+            "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
+            err=True,
+        )
     config = runner.with_preferred_options(config, chosen)
     store = RunStore.create(out, config, {"proposer": proposer})
     execute(config, store, as_json, chosen)

@@ -1,7 +1,8 @@
 """The LLM backbone: any model litellm can reach, asked for batches of samples at one temperature.
 
 litellm is imported on first use (it takes seconds), with its price map read from the installed
-package rather than the internet. Keys come from the environment under each provider's usual
+package rather than the internet; a missing key of a provider in :data:`PROVIDER_KEYS` is
+reported before that. Keys come from the environment under each provider's usual
 name (OPENAI_API_KEY, ANTHROPIC_API_KEY, MISTRAL_API_KEY, ...) and never appear in the errors and
 log lines written here.
 """
@@ -40,6 +41,24 @@ RETRY_STATUSES = frozenset({408, 429})
 AUTH_STATUSES = frozenset({401, 403})
 LITELLM_LOGGERS = ("LiteLLM", "LiteLLM Router", "LiteLLM Proxy")
 NO_PRICE_NOTE = "model not in litellm's price map: cost counted as 0"
+#: The API-key variables of common providers, any one of which will do (as litellm's
+#: ``validate_environment`` names them; ``()``: no key needed), so that a missing key is
+#: reported without importing litellm. Other providers are asked of litellm.
+PROVIDER_KEYS: dict[str, tuple[str, ...]] = {
+    "openai": ("OPENAI_API_KEY",),
+    "anthropic": ("ANTHROPIC_API_KEY",),
+    "mistral": ("MISTRAL_API_KEY",),
+    "gemini": ("GOOGLE_API_KEY", "GEMINI_API_KEY"),
+    "groq": ("GROQ_API_KEY",),
+    "deepseek": ("DEEPSEEK_API_KEY",),
+    "together_ai": ("TOGETHERAI_API_KEY",),
+    "openrouter": ("OPENROUTER_API_KEY",),
+    "cohere": ("COHERE_API_KEY",),
+    "xai": ("XAI_API_KEY",),
+    "fireworks_ai": ("FIREWORKS_AI_API_KEY",),
+    "deepinfra": ("DEEPINFRA_API_KEY",),
+    "hosted_vllm": (),
+}
 _MAX_ERROR_CHARS = 500
 
 Completion = Callable[..., Any]
@@ -166,12 +185,22 @@ class LiteLLMProposer:
         sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         self.settings = settings
-        self._litellm = import_litellm()
-        _check_provider(settings.provider, self._litellm)
-        self._completion = completion if completion is not None else self._litellm.completion
+        if settings.provider not in PROVIDER_KEYS:
+            _check_provider(settings.provider, import_litellm())
+        self._given_completion = completion
         self._sleep = sleep
         use_n = settings.use_n
         self.use_n = settings.provider in N_PROVIDERS if use_n is None else use_n
+
+    @property
+    def _litellm(self) -> ModuleType:
+        """litellm, imported at the first request (a missing key is found without it)."""
+        return import_litellm()
+
+    @property
+    def _completion(self) -> Completion:
+        given = self._given_completion
+        return given if given is not None else self._litellm.completion
 
     @property
     def name(self) -> str:
@@ -327,12 +356,9 @@ class LiteLLMProposer:
             raise ProposerError(missing)
 
     def _missing_key_message(self) -> str:
-        """Which API-key variable to set, when litellm expects one for this model that the
-        environment lacks; empty otherwise."""
-        report = self._litellm.validate_environment(
-            model=self.settings.model, api_base=self.settings.api_base
-        )
-        missing = [name for name in report.get("missing_keys", []) if name.endswith("_API_KEY")]
+        """Which API-key variable to set, when the provider expects one (:data:`PROVIDER_KEYS`,
+        else litellm's ``validate_environment``) that the environment lacks; empty otherwise."""
+        missing = missing_keys(self.settings.model, self.settings.api_base)
         if not missing:
             return ""
         hint = ""
@@ -369,6 +395,17 @@ class LiteLLMProposer:
             return float(self._litellm.completion_cost(completion_response=response)), ""
         except Exception:
             return 0.0, NO_PRICE_NOTE
+
+
+def missing_keys(model: str, api_base: str | None = None) -> list[str]:
+    """The API-key variables ``model`` needs, when none of them is set (empty otherwise);
+    litellm is imported only for a provider outside :data:`PROVIDER_KEYS`."""
+    provider = model.partition("/")[0]
+    if provider in PROVIDER_KEYS:
+        names = PROVIDER_KEYS[provider]
+        return [] if not names or any(name in os.environ for name in names) else list(names)
+    report = import_litellm().validate_environment(model=model, api_base=api_base)
+    return [name for name in report.get("missing_keys", []) if name.endswith("_API_KEY")]
 
 
 def _check_provider(provider: str, litellm: ModuleType) -> None:

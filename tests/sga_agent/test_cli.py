@@ -1,7 +1,11 @@
 """The ``sga-agent`` command line: task listing, evaluation output and exit codes."""
 
 import json
+import os
 import re
+import subprocess
+import sys
+import time
 from importlib import metadata
 from importlib.metadata import EntryPoint
 from pathlib import Path
@@ -166,6 +170,51 @@ def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkey
     assert result.exit_code == 1, result.output
     assert result.output == "Error: no API key for openai/gpt-4o: set OPENAI_API_KEY\n"
     assert not any(tmp_path.iterdir())  # no run folder
+
+
+def test_a_missing_key_is_reported_before_litellm_is_imported(tmp_path):
+    """A fresh process, as a user runs it: the missing key is named in under 2 s (litellm
+    alone takes seconds to import)."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENAI_API_KEY"}
+    args = ["search", "--task", "elastic", "--model", "openai/gpt-4o", "--out-dir", str(tmp_path)]
+    start = time.perf_counter()
+    run = subprocess.run(
+        [sys.executable, "-m", "sga_agent", *args], capture_output=True, text=True, env=env
+    )
+    seconds = time.perf_counter() - start
+    assert run.returncode == 1, run.stderr
+    assert run.stderr == "Error: no API key for openai/gpt-4o: set OPENAI_API_KEY\n"
+    assert seconds < 2.0, f"{seconds:.1f} s"
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("args", "suggested"),
+    [
+        (["--resume", "runs/elastic-1"], "runs/elastic-1"),
+        (["--task", "elastic", "--resume=runs/elastic-2"], "runs/elastic-2"),
+        (["--resume"], "RUN_DIR"),
+    ],
+)
+def test_search_resume_names_the_resume_command(args, suggested):
+    result = CliRunner().invoke(main, ["search", *args])
+    assert result.exit_code == 2, result.output
+    assert f"`sga-agent resume {suggested}` continues a stopped run" in result.output
+    assert "--preset" not in result.output
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--option", "no_such_option=1"], ["--option", "steps=many"], ["--model", "builtin:ga"]],
+)
+def test_usage_errors_come_before_the_no_model_banner(tmp_path, args):
+    result = CliRunner().invoke(
+        main, ["search", "--task", "elastic", *args, "--out-dir", str(tmp_path)]
+    )
+    assert result.exit_code == 2, result.output
+    assert "no --model" not in result.output
+    assert result.output.startswith("Usage:")
+    assert not any(tmp_path.iterdir())
 
 
 def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):

@@ -7,6 +7,7 @@ dummy, and every error path checks that it appears neither in the error nor in t
 from __future__ import annotations
 
 import logging
+import os
 import socket
 import time
 from collections.abc import Iterator
@@ -31,8 +32,10 @@ from sga_agent.proposers import (
 from sga_agent.proposers.litellm_backbone import (
     MAX_BACKOFF_S,
     NO_PRICE_NOTE,
+    PROVIDER_KEYS,
     backoff_wait,
     import_litellm,
+    missing_keys,
 )
 from sga_agent.proposers.redact import RedactingFilter, redact
 from sga_agent.registry import load_task
@@ -233,6 +236,26 @@ def test_a_missing_key_names_the_variable_to_set(
     with pytest.raises(ProposerError, match="no API key for openai/gpt-4o: set OPENAI_API_KEY"):
         proposer(completion=mocked).sample(MESSAGES, 1.0, 1)
     assert len(mocked.calls) == 1
+
+
+@pytest.mark.parametrize("provider", sorted(PROVIDER_KEYS))
+def test_the_key_table_agrees_with_litellm(
+    litellm: Any, monkeypatch: pytest.MonkeyPatch, provider: str
+) -> None:
+    """Keys checked without litellm are those litellm itself would ask for."""
+    for name in [name for name in os.environ if name.endswith("_API_KEY")]:
+        monkeypatch.delenv(name)
+    model = f"{provider}/some-model"
+
+    def litellms() -> list[str]:
+        missing = litellm.validate_environment(model=model)["missing_keys"]
+        return [name for name in missing if name.endswith("_API_KEY")]
+
+    assert missing_keys(model) == litellms() == list(PROVIDER_KEYS[provider])
+    for name in PROVIDER_KEYS[provider]:
+        monkeypatch.setenv(name, "set")
+        assert missing_keys(model) == litellms() == []
+        monkeypatch.delenv(name)
 
 
 @pytest.mark.parametrize(
