@@ -39,6 +39,18 @@ class Section:
     collapsed: bool = False
 
 
+def _runs(text: str) -> list[tuple[bool, list[str]]]:
+    """``text``'s lines grouped into paragraphs and lists: (is_list, lines), a list's lines
+    being its items without the ``- `` marker."""
+    runs: list[tuple[bool, list[str]]] = []
+    for line in text.split("\n"):
+        is_item = line.startswith("- ")
+        if not runs or runs[-1][0] != is_item:
+            runs.append((is_item, []))
+        runs[-1][1].append(line[2:] if is_item else line)
+    return runs
+
+
 def _fence(text: str) -> str:
     longest = max((len(run) for run in text.split("\n") if set(run) == {"`"}), default=2)
     return "`" * max(3, longest + 1)
@@ -53,8 +65,10 @@ def markdown(title: str, sections: list[Section]) -> str:
         else:
             lines += [f"## {section.title}", ""]
         for block in section.blocks:
-            if isinstance(block, Text):
-                lines += [block.text, ""]
+            if isinstance(block, Text):  # a blank line before and after each list
+                for is_list, run in _runs(block.text):
+                    lines += [f"- {item}" for item in run] if is_list else run
+                    lines.append("")
             elif isinstance(block, Table):
                 lines.append("| " + " | ".join(block.header) + " |")
                 lines.append("|" + "---|" * len(block.header))
@@ -94,12 +108,13 @@ def to_html(title: str, sections: list[Section]) -> str:
             body.append(f"<h2>{html.escape(section.title)}</h2>")
         for block in section.blocks:
             if isinstance(block, Text):
-                items = block.text.split("\n")
-                if all(item.startswith("- ") for item in items):
-                    body.append("<ul>" + "".join(f"<li>{_inline(i[2:])}</li>" for i in items)
-                                + "</ul>")  # fmt: skip
-                else:
-                    body.append(f"<p>{_inline(block.text)}</p>")
+                for is_list, run in _runs(block.text):
+                    if is_list:
+                        body.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in run)
+                                    + "</ul>")  # fmt: skip
+                    else:
+                        paragraph = "\n".join(run)
+                        body.append(f"<p>{_inline(paragraph)}</p>")
             elif isinstance(block, Table):
                 head = "".join(f"<th>{html.escape(cell)}</th>" for cell in block.header)
                 rows = "".join(

@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from sga_agent.cli import main
 from sga_agent.report import pictures
 from sga_agent.report.plots import DPI, curves_size
+from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
 from sga_agent.task import Evaluation
@@ -76,6 +77,26 @@ def test_report_has_every_section_and_figure(tmp_path):
     assert png_size(folder / "outcomes.png") == (7 * DPI, 4 * DPI)
     width, height = curves_size([None] * 3)
     assert png_size(folder / "curves.png") == (round(width * DPI), round(height * DPI))
+
+
+def list_items(md: str) -> list[str]:
+    return [line[2:] for line in md.splitlines() if line.startswith("- ")]
+
+
+def test_a_list_after_a_line_of_text_renders_as_a_list():
+    """The fitted-parameter list follows its heading line in one text block: in HTML it is a
+    <ul>, in Markdown it gets the blank line a list needs."""
+    text = "What its fitted parameters amount to:\n- `exp(log_E)` = 2e+05\n- `nu` = 0.3\nafter"
+    sections = [Section("Summary", [Text(text), Text("- one\n- two")])]
+    page = to_html("t", sections)
+    assert (
+        "<p>What its fitted parameters amount to:</p><ul><li><code>exp(log_E)</code> = 2e+05</li>"
+        "<li><code>nu</code> = 0.3</li></ul><p>after</p>"
+    ) in page.replace("\n", "")
+    assert "<ul><li>one</li><li>two</li></ul>" in page
+    md = markdown("t", sections)
+    assert "amount to:\n\n- `exp(log_E)` = 2e+05\n- `nu` = 0.3\n\nafter\n" in md
+    assert page.count("<li>") == len(list_items(md)) == 4
 
 
 class WithMolecules(CurvesAndFailures):
@@ -212,6 +233,9 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     assert f"**{100 * free['final_error']:.3g}%** of the body size" in summary_part
     assert found["best_solution"].strip() in summary_part
     folder = run_dir / "report"
+    page = (folder / "report.html").read_text()
+    assert "amount to (computed from the captured graph):\n\n- `" in md
+    assert page.count("<li>") == len(list_items(md))  # each list, the derived values too
     assert png_size(folder / "motion.png") == (round(2.8 * pictures.MOTION_FRAMES * DPI), 6 * DPI)
     assert png_size(folder / "zigzag.png") == (9 * DPI, round(4.2 * DPI))
     assert (folder / "motion.gif").read_bytes()[:6] == b"GIF89a"
