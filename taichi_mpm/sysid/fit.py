@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
 
@@ -17,6 +19,25 @@ OPTIMIZERS = ("adam", "lbfgs")
 PLATEAU_CUTS = 3  # Adam: step cuts on plateaus before it stops
 MAX_BACKOFFS = 20  # steps undone because the simulation blew up, before giving up
 LINE_SEARCH_HALVINGS = 10  # L-BFGS: below 2^-10 of the step, no descent is left
+
+log = logging.getLogger("taichi_mpm.sysid")
+
+
+class Progress:
+    """Where a fit's progress lines go: always to the ``taichi_mpm.sysid`` logger at INFO
+    (silent unless logging is configured), and to stderr as well when ``verbose``."""
+
+    def __init__(self, verbose: bool = False, prefix: str = "") -> None:
+        self.verbose, self.prefix = verbose, prefix
+
+    def __call__(self, message: str) -> None:
+        log.info("%s%s", self.prefix, message)
+        if self.verbose:
+            print(f"{self.prefix}{message}", file=sys.stderr, flush=True)
+
+    def iteration(self, iteration: int, loss: float, values: dict[str, float]) -> None:
+        shown = "".join(f", {name} {value:.5g}" for name, value in values.items())
+        self(f"iteration {iteration}: loss {loss:.4e}{shown}")
 
 
 class FitError(ValueError):
@@ -142,6 +163,7 @@ def fit(
     names: Sequence[str] | None = None,
     settings: FitSettings | None = None,
     callback: Callable[[int, float, dict[str, float]], None] | None = None,
+    verbose: bool = False,
     **options,
 ) -> FitResult:
     """Fit ``names`` (default: all parameters of ``material``) to ``observation``.
@@ -159,8 +181,24 @@ def fit(
         ``learning_rate=0.5``, ...) build or override it.
     callback : callable, optional
         Called as ``callback(iteration, loss, values)`` after every step.
+    verbose : bool
+        Print a line per step (its loss and values) to stderr. Either way these lines go to
+        the ``taichi_mpm.sysid`` logger at INFO level, which prints nothing unless logging is
+        configured (``logging.basicConfig(level=logging.INFO)``).
     """
     settings = resolve_settings(settings, options)
+    return fit_reporting(observation, material, names, settings, callback, Progress(verbose))
+
+
+def fit_reporting(
+    observation: Observation,
+    material: Material,
+    names: Sequence[str] | None,
+    settings: FitSettings,
+    callback: Callable[[int, float, dict[str, float]], None] | None,
+    progress: Progress,
+) -> FitResult:
+    """:func:`fit` with its progress lines going to ``progress``."""
     available = material.parameters()
     names = list(available if names is None else names)
     unknown = [name for name in names if name not in available]
@@ -183,16 +221,35 @@ def fit(
     if settings.fit_velocity:
         start = settings.initial_velocity or ((0.0,) * 3, (0.0,) * 3)
         u = np.concatenate([u, np.asarray(start[0], float), np.asarray(start[1], float)])
+    progress(
+        f"fitting {', '.join(names + (['initial velocity'] if settings.fit_velocity else []))} "
+        f"with {settings.optimizer}, at most {settings.iterations} iterations (the first one "
+        "compiles the simulator's kernels)"
+    )
     step = _adam if settings.optimizer == "adam" else _lbfgs
-    return step(
+    result = step(
         objective,
         u,
         settings.iterations,
         settings.learning_rate,
         settings.tolerance,
         settings.patience,
-        callback,
+        _reporting(callback, progress),
     )
+    ending = "converged" if result.converged else "stopped without converging"
+    progress(f"{ending} after {result.iterations} iterations: loss {result.loss:.4e}")
+    return result
+
+
+def _reporting(callback, progress: Progress):
+    """``callback`` preceded by the progress line of each step."""
+
+    def report(iteration: int, loss: float, values: dict[str, float]) -> None:
+        progress.iteration(iteration, loss, values)
+        if callback is not None:
+            callback(iteration, loss, values)
+
+    return report
 
 
 def resolve_settings(settings: FitSettings | None, options: dict) -> FitSettings:

@@ -21,7 +21,15 @@ import numpy as np
 
 from taichi_mpm.materials import Material
 from taichi_mpm.sysid import parameters
-from taichi_mpm.sysid.fit import FitError, FitResult, FitSettings, Objective, fit, resolve_settings
+from taichi_mpm.sysid.fit import (
+    FitError,
+    FitResult,
+    FitSettings,
+    Objective,
+    Progress,
+    fit_reporting,
+    resolve_settings,
+)
 from taichi_mpm.sysid.observation import Observation
 
 RELATIVE_STD_LIMIT = 0.05  # a parameter known worse than 5% is not identified
@@ -70,6 +78,7 @@ def identify(
     seed: int = 0,
     settings: FitSettings | None = None,
     callback: Callable[[int, int, float, dict[str, float]], None] | None = None,
+    verbose: bool = False,
     **options,
 ) -> Identification:
     """Fit from ``restarts`` initial guesses and report what the data determine.
@@ -77,7 +86,9 @@ def identify(
     The first run starts from ``material``'s values; further runs start from guesses
     spread by up to a factor 3 around them (log-uniform, reproducible with ``seed``).
     ``settings`` and keyword ``options`` are those of :func:`~taichi_mpm.sysid.fit`;
-    ``callback(run, iteration, loss, values)`` follows every run.
+    ``callback(run, iteration, loss, values)`` follows every run; ``verbose`` prints a line
+    per step and per phase to stderr (these lines also go to the ``taichi_mpm.sysid`` logger
+    at INFO level, silent unless logging is configured).
     """
     if restarts < 1:
         raise FitError(f"restarts={restarts} must be >= 1")
@@ -88,16 +99,19 @@ def identify(
     for run in range(restarts):
         start = material if run == 0 else _spread(material, names, rng)
         runs.append(
-            fit(
+            fit_reporting(
                 observation,
                 start,
                 names,
                 settings,
-                callback=None if callback is None else _for_run(callback, run),
+                None if callback is None else _for_run(callback, run),
+                Progress(verbose, f"run {run + 1}/{restarts}: " if restarts > 1 else ""),
             )
         )
     best = min(runs, key=lambda r: r.loss)
     fitted = material.replace(**best.values)
+    size = len(names) + (6 if best.initial_velocity is not None else 0)
+    Progress(verbose)(f"uncertainties: {2 * size} simulations around the best fit")
     relative_std, hessian, warnings = _curvature(observation, fitted, names, best)
     if not best.converged:
         warnings.insert(

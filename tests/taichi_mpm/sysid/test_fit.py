@@ -1,10 +1,12 @@
 """System identification recovers hidden material parameters from synthetic motion."""
 
+import logging
+
 import numpy as np
 import pytest
 
 import taichi_mpm as tm
-from taichi_mpm.sysid import FitError, fit, observation_from_times
+from taichi_mpm.sysid import FitError, fit, identify, observation_from_times
 
 pytestmark = pytest.mark.slow  # fits of a simulated observation: seconds each
 
@@ -171,3 +173,32 @@ def test_fit_from_a_subset_of_particles_and_sparse_frames():
     )
     errors = relative_errors(result.values, truth.parameters())
     assert max(errors.values()) < 0.02, result.values
+
+
+def test_progress_is_logged_and_printed_only_when_verbose(capsys, caplog):
+    """A library call prints nothing; its progress goes to the taichi_mpm.sysid logger, and
+    to stderr with verbose=True (one line per step and per phase)."""
+    truth = tm.Material(tm.NeoHookean(E=5e4, nu=0.3))
+    observation = synthetic(truth)
+    guess = truth.replace(E=1.5e5)
+    with caplog.at_level(logging.INFO, logger="taichi_mpm.sysid"):
+        fit(observation, guess, ["E"], iterations=2)
+    assert capsys.readouterr() == ("", "")
+    assert [r.name for r in caplog.records] == ["taichi_mpm.sysid"] * 4
+    assert caplog.records[1].getMessage().startswith("iteration 1: loss ")
+
+    fit(observation, guess, ["E"], iterations=2, verbose=True)
+    out, err = capsys.readouterr()
+    lines = err.splitlines()
+    assert out == "" and len(lines) == 4
+    assert lines[0].startswith("fitting E with adam, at most 2 iterations")
+    assert lines[1].startswith("iteration 1: loss ") and lines[1].endswith(", E 1.5e+05")
+    assert lines[2].startswith("iteration 2: loss ")
+    assert lines[3].startswith("stopped without converging after 2 iterations: loss ")
+
+    identify(observation, guess, ["E"], restarts=2, iterations=1, verbose=True)
+    lines = capsys.readouterr().err.splitlines()
+    assert [line.split(":")[0] for line in lines] == ["run 1/2"] * 3 + ["run 2/2"] * 3 + [
+        "uncertainties"
+    ]
+    assert lines[-1] == "uncertainties: 2 simulations around the best fit"
