@@ -6,6 +6,8 @@ One module per command: :mod:`.tasks`, :mod:`.evaluate`, :mod:`.search`, :mod:`.
 
 from __future__ import annotations
 
+import os
+
 import click
 
 
@@ -18,6 +20,10 @@ def main() -> None:
     file in the sandbox, exactly as the search does; `sga-agent search` runs the search and
     `sga-agent resume` continues a stopped one.
     """
+    # A task that imports Taichi in this process (its findings, its report) under the
+    # progress bar would take rich's stdout proxy for a notebook's and log "Graphical python
+    # shell detected" through its own logger, straight onto the bar; its kernels print nothing.
+    os.environ.setdefault("TI_ENABLE_PYBUF", "0")
 
 
 # The commands register themselves on ``main`` when imported.

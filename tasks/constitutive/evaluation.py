@@ -7,6 +7,8 @@ candidate is fitted (the fit worker, tests), never when the search lists tasks.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import time
 from collections.abc import Iterator
@@ -38,11 +40,14 @@ from tasks.constitutive.specs import ELASTIC_TRUTH, KNOWN_ELASTIC, ConstitutiveS
 
 
 def ensure_runtime(precision: str) -> None:
-    """Start Taichi on the CPU unless it runs already (one precision per process)."""
+    """Start Taichi on the CPU unless it runs already (one precision per process), without
+    its "[Taichi] Starting on arch=x64" line: in the search's own process (the findings) that
+    line would land on the progress bar."""
     try:
         runtime.current()
     except runtime.RuntimeNotInitialized:
-        tm.init(arch="cpu", precision=precision)
+        with contextlib.redirect_stdout(io.StringIO()):
+            tm.init(arch="cpu", precision=precision)
 
 
 def check_precision(precision: str | None) -> None:

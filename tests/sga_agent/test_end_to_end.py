@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import json
 import os
+import pty
+import re
+import select
 import signal
 import subprocess
 import sys
@@ -120,6 +123,51 @@ def test_search_end_to_end(tmp_path):
     assert (folder / "config.json").is_file() and (folder / "summary.json").is_file()
     everything = "".join(p.read_text() for p in folder.rglob("*") if p.is_file())
     assert KEY not in everything and KEY not in run.stderr
+
+
+def in_a_terminal(command: list[str], timeout_s: float) -> tuple[int, str]:
+    """Run ``command`` on a pseudo-terminal, as a user would (rich's live progress bar on);
+    its exit code and everything it wrote to the screen."""
+    screen, terminal = pty.openpty()
+    process = subprocess.Popen(command, stdin=terminal, stdout=terminal, stderr=terminal)
+    os.close(terminal)
+    written = []
+    deadline = time.monotonic() + timeout_s
+    try:
+        while time.monotonic() < deadline:
+            if select.select([screen], [], [], 1.0)[0]:
+                try:
+                    chunk = os.read(screen, 65536)
+                except OSError:  # EIO: the command has closed the terminal
+                    break
+                if not chunk:
+                    break
+                written.append(chunk)
+        return process.wait(timeout=max(1.0, deadline - time.monotonic())), b"".join(
+            written
+        ).decode("utf-8", "replace")
+    finally:
+        if process.poll() is None:
+            process.kill()
+        os.close(screen)
+
+
+TAICHI_LOG_LINE = re.compile(r"\[Taichi\]|\[[TDIWEC] \d\d/\d\d/\d\d ")
+
+
+@pytest.mark.slow
+def test_the_end_of_a_searchs_screen_has_no_taichi_log_line(tmp_path):
+    """The findings start Taichi in the search's own process under the progress bar (the true
+    law's loss, the best law's free run): none of its log lines may reach the screen."""
+    command = [
+        sys.executable, "-m", "sga_agent", "search", "--task", "elastic", "--iterations", "1",
+        "--exploit", "1", "--explore", "0", "--epochs", "1", "--option", "steps=100",
+        "--workers", "1", "--out-dir", str(tmp_path),
+    ]  # fmt: skip
+    code, screen = in_a_terminal(command, timeout_s=600)
+    assert code == 0, screen[-3000:]
+    assert "free run of the best" in screen and "report: sga-agent report" in screen
+    assert not TAICHI_LOG_LINE.search(screen), screen[-3000:]
 
 
 def fitted_in_iteration_1(log: Path) -> int:
