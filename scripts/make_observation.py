@@ -25,6 +25,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.sysid.families import (
     DEFAULTS,
     FAMILIES,
@@ -55,7 +56,7 @@ def make_scene(name: str, steps: int):
 
 def observed_steps(steps: int, frames: int) -> np.ndarray:
     """``frames`` step indices evenly spaced over (0, steps], ending at ``steps``."""
-    return np.unique(np.rint(np.linspace(steps / frames, steps, frames)).astype(np.int64))
+    return evenly_spaced(steps / frames, steps, frames)
 
 
 def _families_help() -> str:

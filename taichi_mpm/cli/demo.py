@@ -11,6 +11,7 @@ from rich.console import Console
 
 import taichi_mpm as tm
 from taichi_mpm.cli import arch_option, main, precision_option, start_taichi
+from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.render import render_frames
 
 #: Most panels a demo picture may have (beyond this the panels become too small to read).
@@ -53,7 +54,7 @@ def frame_steps(steps: int, frames: int) -> np.ndarray:
     """``frames`` step indices evenly spaced over [0, steps]; a single frame shows the end."""
     if frames == 1:
         return np.array([steps])
-    return np.unique(np.linspace(0, steps, frames).round().astype(np.int64))
+    return evenly_spaced(0, steps, frames)
 
 
 def _check_output(out: Path) -> Path:

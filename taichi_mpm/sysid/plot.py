@@ -17,6 +17,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from taichi_mpm.frames import evenly_spaced
+
 #: Most frames drawn.
 MAX_PANELS = 4
 PANEL_SIZE = 3.2  # inches
@@ -29,7 +31,7 @@ def comparison_frames(num_frames: int, panels: int = MAX_PANELS) -> np.ndarray:
     """Indices of up to ``panels`` frames evenly spread over ``num_frames``, last included."""
     if num_frames < 1:
         raise ValueError("there are no frames to draw")
-    return np.unique(np.linspace(0, num_frames - 1, min(panels, num_frames)).round().astype(int))
+    return evenly_spaced(0, num_frames - 1, panels)
 
 
 def plot_comparison(

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from taichi_mpm.frames import evenly_spaced
 from tasks.constitutive.inner import InnerResult, InnerSettings
 
 CURVE_POINTS = 10  # values listed per curve
@@ -29,7 +30,7 @@ def corner_particles(positions: np.ndarray, count: int = CORNERS) -> list[int]:
 def _sampled(values: list[float], points: int = CURVE_POINTS) -> list[tuple[int, float]]:
     if len(values) <= points:
         return list(enumerate(values))
-    picks = np.unique(np.linspace(0, len(values) - 1, points).round().astype(int))
+    picks = evenly_spaced(0, len(values) - 1, points)
     return [(int(i), values[i]) for i in picks]
 
 
@@ -102,7 +103,7 @@ def trajectory_text(
 ) -> str:
     """Positions of ``particles`` at ~10 moments, simulated next to observed."""
     steps = observed.shape[0] - 1
-    frames = np.linspace(0, steps, TRAJECTORY_FRAMES + 1).round().astype(int)[1:]
+    frames = evenly_spaced(0, steps, TRAJECTORY_FRAMES + 1)[1:]
     lines = ["Trajectories of corner particles (x, y, z in m; y points up), simulated vs observed:"]
     for number, particle in enumerate(particles):
         start = observed[0, particle]

@@ -22,6 +22,7 @@ from bridges import laws as torch_laws
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
+from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.sysid.families import FAMILIES, material_family
 from tasks.constitutive import feedback
 from tasks.constitutive.assessment import derived_values, fitted_law
@@ -117,8 +118,7 @@ def trajectory_text(predicted: np.ndarray, data: ObservedData) -> str:
     """Four observed particles at the corners of the body, simulated next to observed, at up
     to ten of the observed frames."""
     start = data.scene.positions[data.particles]
-    picks = np.unique(np.linspace(0, len(data.frame_steps) - 1, feedback.TRAJECTORY_FRAMES)
-                      .round().astype(int))  # fmt: skip
+    picks = evenly_spaced(0, len(data.frame_steps) - 1, feedback.TRAJECTORY_FRAMES)
     lines = ["Trajectories of observed particles near the body's corners (x, y, z in m; y "
              "points up), simulated vs observed:"]  # fmt: skip
     for number, column in enumerate(dict.fromkeys(feedback.corner_particles(start))):
