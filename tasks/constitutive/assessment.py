@@ -21,7 +21,7 @@ from bridges import laws as torch_laws
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Assessment, FreeRun
-from tasks.constitutive.artifacts import FRAMES
+from taichi_mpm.frames import evenly_spaced
 from tasks.constitutive.evaluation import (
     check_precision,
     ensure_runtime,
@@ -40,6 +40,8 @@ from tasks.constitutive.specs import (
     ConstitutiveSpec,
 )
 
+#: Frames of the free run kept for reports (the first and the last included).
+FRAMES = 31
 _GIVEN = f"elastic law given: StVK on the Hencky strain, E = {KNOWN_ELASTIC.E:g} Pa, " \
     f"nu = {KNOWN_ELASTIC.nu:g}"  # fmt: skip
 _PLASTIC_NAMES = {
@@ -102,7 +104,7 @@ def free_run(
     else:
         rollout = Rollout(scene, law, known_elastic_law(dtype))
     size = float(np.ptp(observed[0], axis=0).max())
-    frames = np.unique(np.linspace(0, scene.steps, FRAMES).round().astype(int))
+    frames = evenly_spaced(0, scene.steps, FRAMES)
     try:
         result = trajectory_loss(rollout, observed, None, spec.reset_every, backward=False)
     except UnstableSimulation as error:

@@ -24,7 +24,6 @@ from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
 from taichi_mpm import runtime
 from tasks.constitutive import feedback, law_kernel
-from tasks.constitutive.artifacts import encode_positions
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
 from tasks.constitutive.inner import (
     InnerResult,
@@ -151,8 +150,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
     Invalid results carry a reason. ``settings.options`` holds fields of
-    :class:`~tasks.constitutive.options.ConstitutiveOptions`. The artifact ``trajectory`` holds
-    the best epoch's positions (see :mod:`tasks.constitutive.artifacts`).
+    :class:`~tasks.constitutive.options.ConstitutiveOptions`.
     """
     started = time.perf_counter()
     options = ConstitutiveOptions(**settings.options)
@@ -202,8 +200,8 @@ def observed_deformations(observed: Trajectory, dtype: torch.dtype) -> torch.Ten
 
 
 def fitted_evaluation(result: InnerResult, feedback_text: str, started: float) -> Evaluation:
-    """The Evaluation of a finished fit: its best epoch's loss and parameters, the curves, the
-    best epoch's positions as the ``trajectory`` artifact; ``started`` is when it began."""
+    """The Evaluation of a finished fit: its best epoch's loss and parameters and the curves;
+    ``started`` is when it began."""
     return Evaluation(
         valid=math.isfinite(result.best_loss),
         loss=result.best_loss,
@@ -216,5 +214,4 @@ def fitted_evaluation(result: InnerResult, feedback_text: str, started: float) -
             "epoch_seconds": result.seconds,
         },  # fmt: skip
         seconds=time.perf_counter() - started,
-        artifacts={"trajectory": encode_positions(result.positions)},
     )

@@ -7,13 +7,11 @@ import math
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings, InvalidSolution, Task
-from tasks.constitutive.artifacts import decode_positions
 from tasks.constitutive.law_code import LawCodeError
 
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
@@ -45,9 +43,7 @@ def test_truth_scores_noise_and_seed_scores_worse(name):
     assert truth.loss < 1e-8
     assert seed.loss > 1e3 * max(truth.loss, 1e-12)
     assert "Trajectories of corner particles" in truth.feedback
-    steps, positions = decode_positions(truth.artifacts["trajectory"])
-    assert steps[0] == 0 and steps[-1] == QUICK["steps"]
-    assert positions.shape[0] == len(steps) and np.isfinite(positions).all()
+    assert truth.artifacts == {}  # reports draw the free run from the task's assessment
 
 
 def _shifted(code: str, replacements: dict[str, float]) -> str:
