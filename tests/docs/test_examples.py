@@ -1,0 +1,142 @@
+"""The site's examples (files under examples/, pulled into docs/ by snippets) run as written,
+and print what the site shows (docs/outputs/*.txt, compared with every digit masked).
+
+After a deliberate change of an example's output, ``SGA_UPDATE_DOC_OUTPUTS=1 python -m pytest
+-q tests/docs`` rewrites the recorded outputs.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+EXAMPLES = ROOT / "examples"
+OUTPUTS = DOCS / "outputs"
+UPDATE = os.environ.get("SGA_UPDATE_DOC_OUTPUTS") == "1"
+#: A snippet line of a page: --8<-- "path from the repository root".
+SNIPPET = re.compile(r'^-+8<-+\s+"([^"]+)"', re.MULTILINE)
+#: Taichi's own log lines ("[Taichi] Starting on arch=x64", "[I 11/25/26 ...] ..."), which the
+#: site leaves out.
+TAICHI_LOG = re.compile(r"^\[(Taichi|[IWE] \d)")
+
+
+def included() -> set[Path]:
+    """Every file a page of the site (or the changelog page) pulls in."""
+    pages = [*DOCS.rglob("*.md")]
+    return {ROOT / path for page in pages for path in SNIPPET.findall(page.read_text("utf-8"))}
+
+
+def environment(**extra: str) -> dict[str, str]:
+    path = os.pathsep.join(filter(None, [extra.pop("PYTHONPATH", ""), str(ROOT),
+                                         os.environ.get("PYTHONPATH")]))  # fmt: skip
+    return {**os.environ, "PYTHONPATH": path, "PYTHONUNBUFFERED": "1", "COLUMNS": "100",
+            "LITELLM_LOCAL_MODEL_COST_MAP": "True", **extra}  # fmt: skip
+
+
+def run(command: list[str], cwd: Path = ROOT, env: dict | None = None, timeout: float = 600):
+    """Run ``command``; its stdout and stderr together, as a terminal would show them."""
+    done = subprocess.run(command, cwd=cwd, env=env or environment(), stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True, timeout=timeout)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:]
+    return done.stdout
+
+
+def shown(output: str) -> str:
+    """``output`` as the site shows it: without Taichi's log lines and trailing blanks."""
+    lines = [line.rstrip() for line in output.splitlines() if not TAICHI_LOG.match(line)]
+    return "\n".join(lines).strip("\n") + "\n"
+
+
+def assert_shown_on_the_site(name: str, output: str) -> None:
+    """``output`` matches docs/outputs/NAME.txt, digits masked (values, times, dates vary)."""
+    path = OUTPUTS / f"{name}.txt"
+    text = shown(output)
+    if UPDATE:
+        path.write_text(text, encoding="utf-8")
+        return
+    recorded = path.read_text(encoding="utf-8")
+
+    def mask(value: str) -> str:
+        return re.sub(r"\d", "#", value)
+
+    assert mask(text) == mask(recorded), (
+        f"{path.relative_to(ROOT)} no longer shows what the example prints; if the change is "
+        f"meant, rerun with SGA_UPDATE_DOC_OUTPUTS=1.\nNow:\n{text}\nOn the site:\n{recorded}"
+    )
+
+
+def test_every_example_is_on_the_site_and_every_included_file_exists():
+    files = included()
+    assert all(path.is_file() for path in files), sorted(p for p in files if not p.is_file())
+    scripts = {p for p in EXAMPLES.glob("*.py")}
+    plugin = {EXAMPLES / "numbers_plugin" / n for n in ("sga_numbers.py", "pyproject.toml")}
+    assert scripts | plugin <= files, sorted(scripts | plugin - files)
+    assert set(OUTPUTS.glob("*.txt")) <= files, "a recorded output no page shows"
+    # Every other example on the site is a ground-truth law, run by the constitutive tests
+    # (tests/tasks/constitutive: test_law_shape.py, test_cli_evaluate.py).
+    others = {p for p in files if p.is_relative_to(EXAMPLES)} - scripts - plugin
+    assert all(p.parent == EXAMPLES / "laws" for p in others), sorted(others)
+
+
+@pytest.mark.slow
+def test_simulate_cube():
+    output = run([sys.executable, "examples/simulate_cube.py", "--steps", "200"])
+    gradients = dict(re.findall(r"dloss/d(\w+) = (\S+)", output))
+    assert set(gradients) == {"E", "nu", "yield_stress"}
+    assert float(gradients["yield_stress"]) > 0  # the observation's yield stress is lower
+    assert_shown_on_the_site("simulate_cube", output)
+
+
+@pytest.mark.slow
+def test_bridges_rollout():
+    output = run([sys.executable, "examples/bridges_rollout.py", "--steps", "200"])
+    loss = float(re.search(r"^loss (\S+)", output, re.MULTILINE).group(1))
+    gradient = float(re.search(r"dloss/dyield_stress (\S+)", output).group(1))
+    assert loss > 1e-9 and gradient < 0  # the law's yield stress is too low
+    assert_shown_on_the_site("bridges_rollout", output)
+
+
+@pytest.mark.slow
+def test_sysid_cube():
+    output = run([sys.executable, "examples/sysid_cube.py", "--steps", "300"])
+    fitted = float(re.search(r"yield_stress\s+(\S+)\s+\+-", output).group(1))
+    assert abs(fitted / 2e3 - 1) < 0.05 and "all parameters identified" in output
+    assert_shown_on_the_site("sysid_cube", output)
+
+
+@pytest.mark.slow
+def test_the_plugin_tutorial(tmp_path: Path):
+    """The tutorial's commands: pip installs the plugin, sga-agent lists it, evaluates a
+    solution and searches it with the plugin's own proposer (capture and fit processes
+    included)."""
+    source = shutil.copytree(EXAMPLES / "numbers_plugin", tmp_path / "numbers_plugin")
+    site = tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+         "--target", str(site), str(source)],
+        check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    assert (site / "sga_numbers.py").is_file()
+    env = environment(PYTHONPATH=str(site))
+    agent = [sys.executable, "-m", "sga_agent"]
+
+    listed = run([*agent, "tasks"], cwd=tmp_path, env=env)
+    assert re.search(r"^numbers\s+entity\s+Find three hidden numbers", listed, re.MULTILINE)
+
+    evaluated = run([*agent, "evaluate", "--task", "numbers", "numbers_plugin/guess.json"],
+                    cwd=tmp_path, env=env)  # fmt: skip
+    assert "squared distance 0.25" in evaluated
+    assert_shown_on_the_site("numbers_evaluate", evaluated)
+
+    searched = run([*agent, "search", "--task", "numbers", "--seed", "0", "--out-dir", "runs"],
+                   cwd=tmp_path, env=env)  # fmt: skip
+    assert "25 evaluations (25 ok)" in searched
+    assert_shown_on_the_site("numbers_search", searched)
