@@ -3,34 +3,45 @@
 Both evaluate the same candidates in the same sandbox (a confined capture, then a trusted fit),
 ``--workers`` at a time: the local pool (:class:`~sga_agent.sandbox.SandboxPool`) in threads of
 this process, its capture servers and fit workers kept warm from one candidate to the next;
-Ray (:class:`~sga_agent.ray_executor.RayPool`) as tasks of a local Ray instance of
-``--workers`` CPUs that the benchmark starts, each task starting its own capture server and
-fit worker. The candidates are, by default, a cheap task whose fit keeps one CPU busy for
-``--work`` seconds (the sandbox's start-up and the capture come on top), or ``--task NAME``
-(e.g. ``--task elastic --option steps=50 --epochs 1``): its seed solution, evaluated again and
-again. Each pool first evaluates ``--workers`` candidates untimed (Ray starts its worker
-processes; the local pool starts its helpers); Ray's start-up is reported separately. With
+Ray (:class:`~sga_agent.ray_executor.RayPool`) on the slots of a local Ray instance of
+``--workers`` CPUs that the benchmark starts, each slot an actor whose capture server and fit
+worker are kept warm the same way. The candidates are, by default, a cheap task whose fit keeps
+one CPU busy for ``--work`` seconds (the sandbox's start-up and the capture come on top), or
+``--task NAME`` (e.g. ``--task elastic --option steps=50 --epochs 1``): its seed solution,
+evaluated again and again. Each pool first evaluates ``--workers`` candidates untimed (both
+start their helpers); the pools' start-up is reported separately. With
 ``--repeats``, each pool runs that many times, alternately first and second, and the medians
 are shown. Usage::
 
     python benchmarks/executors.py [--candidates 40] [--workers 2] [--work 0.5] [--repeats 3]
     python benchmarks/executors.py --task elastic --option steps=50 --epochs 1 --candidates 8
+    python benchmarks/executors.py --search elastic --ray-address 127.0.0.2:6379 --repeats 2
+
+``--ray-address`` uses a running cluster instead of a local instance. ``--search TASK`` times
+whole searches instead: it records one search of TASK with its built-in proposer (the quick
+preset, untimed), then replays its answers, so that both evaluate the same candidates, on the
+local pool and on Ray alternately, and checks that every candidate's outcome is the same.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import os
 import statistics
+import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import wait
 from pathlib import Path
 from typing import Any
 
-from sga_agent import registry
-from sga_agent.cli.options import key_value_options
+from sga_agent import registry, runner
+from sga_agent.cli.options import key_value_options, typed_task_options
+from sga_agent.config import PRESETS, SearchConfig
 from sga_agent.ray_executor import RayPool
+from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool
 from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, PromptParts
 
@@ -98,6 +109,54 @@ def measure(
     return {"start-up s": start_up, "seconds": seconds, "per minute": 60 * len(solutions) / seconds}
 
 
+def search_seconds(config: SearchConfig, folder: Path) -> tuple[float, dict[str, dict]]:
+    """Wall time of one whole search (pool start-up included) and its candidates' outcomes."""
+    started = time.perf_counter()
+    store = RunStore.create(folder, config, {})
+    runner.run(config, store)
+    seconds = time.perf_counter() - started
+    outcomes = {}
+    for candidate in sorted((store.path / "candidates").iterdir()):
+        evaluation = json.loads((candidate / "evaluation.json").read_text())
+        outcomes[candidate.name] = (evaluation["status"], evaluation["loss"])
+    return seconds, outcomes
+
+
+def compare_searches(args: argparse.Namespace, options: dict[str, Any]) -> None:
+    """Record a quick search of ``args.search``, then time its replays on both executors."""
+    folder = Path(tempfile.mkdtemp(prefix="executors-search-"))
+    preset = {k: v for k, v in PRESETS["quick"].items() if k != "bilevel"}
+    base = SearchConfig(task=args.search, proposer=runner.BUILTIN, preset="quick",
+                        workers=args.workers, task_options=options, **preset)  # fmt: skip
+    base = runner.with_preferred_options(base, runner.make_proposer(base, registry.load_task(
+        args.search)))  # fmt: skip
+    print(f"recording a quick search of {args.search} (untimed) ...", flush=True)
+    _, recorded = search_seconds(base, folder / "recorded")
+    (recorded_path,) = (folder / "recorded").iterdir()
+    replay = dataclasses.replace(base, proposer=f"{runner.REPLAY_PREFIX}{recorded_path}")
+    configs = {
+        "local": replay,
+        "ray": dataclasses.replace(replay, executor="ray", ray_address=args.ray_address),
+    }
+    seconds: dict[str, list[float]] = {name: [] for name in configs}
+    load_before = os.getloadavg()
+    for repeat in range(args.repeats):
+        for name in sorted(configs, reverse=repeat % 2 == 1):
+            took, outcomes = search_seconds(configs[name], folder / f"{name}-{repeat}")
+            if outcomes != recorded:
+                raise RuntimeError(f"the {name} replay's outcomes differ from the recorded run")
+            seconds[name].append(took)
+            print(f"  {name}: {len(outcomes)} candidates in {took:.1f} s", flush=True)
+    load_after = os.getloadavg()
+    local, ray = (statistics.median(seconds[name]) for name in ("local", "ray"))
+    where = args.ray_address or f"a local Ray instance of {args.workers} CPUs"
+    print(f"\n{len(recorded)} candidates of a quick {args.search} search, {args.workers} at a "
+          f"time; Ray on {where}; load average before {load_before[0]:.2f}, "
+          f"after {load_after[0]:.2f}")
+    print(f"local {local:.1f} s, Ray {ray:.1f} s (medians of {args.repeats}): Ray / local "
+          f"wall time {ray / local:.2f}; every outcome the same as the recorded run's")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--candidates", type=int, default=40, help="timed evaluations per pool")
@@ -108,13 +167,21 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, help="inner-optimization epochs of --task")
     parser.add_argument("--timeout", type=float, default=900.0, help="limit per evaluation (s)")
     parser.add_argument("--repeats", type=int, default=1, help="runs per pool, interleaved")
+    parser.add_argument("--ray-address", help="a running Ray cluster (HOST:PORT) to use")
+    parser.add_argument("--search", metavar="TASK", help="time whole searches of TASK instead")
     args = parser.parse_args()
 
+    named = args.search or args.task
+    raw = key_value_options(args.option)
+    options = typed_task_options(registry.load_task(named), raw) if named else {}
+    if args.search:
+        compare_searches(args, options)
+        return
     if args.task:
         task, seed = args.task, registry.load_task(args.task).seed_solution()
     else:
         task, seed = BUSY_TASK, str(args.work)
-    settings = EvaluationSettings(epochs=args.epochs, options=key_value_options(args.option))
+    settings = EvaluationSettings(epochs=args.epochs, options=options)
     solutions = [f"{seed}\n# candidate {i}" for i in range(args.candidates)]
     limits = SandboxLimits(timeout_s=args.timeout)
     paths = [] if args.task else [HERE]
@@ -122,7 +189,8 @@ def main() -> None:
           f"{args.workers} at a time, on {os.cpu_count()} cores", flush=True)  # fmt: skip
     pools: dict[str, Callable[[], SandboxPool | RayPool]] = {
         "local": lambda: SandboxPool(args.workers, limits, extra_python_path=paths),
-        "ray": lambda: RayPool(None, limits, local_cpus=args.workers, extra_python_path=paths),
+        "ray": lambda: RayPool(args.ray_address, limits, local_cpus=args.workers,
+                               extra_python_path=paths),  # fmt: skip
     }
     runs: dict[str, list[dict[str, float]]] = {name: [] for name in pools}
     for repeat in range(args.repeats):  # alternating the order evens out a drifting load

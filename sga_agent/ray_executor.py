@@ -1,50 +1,61 @@
 """Evaluating candidates on a Ray cluster: :class:`RayPool`, the distributed twin of SandboxPool.
 
-Each evaluation is a Ray task that calls :func:`~sga_agent.sandbox.evaluate_in_sandbox` on the
-node Ray schedules it on, so it is captured in the same confined process and fitted by the
-same trusted fit worker as on this machine, with the same limits, isolation, timeouts and
-outcomes (the helpers start afresh for each evaluation there, not warm). Ray picks the node
-from the resources each task reserves (``cpus_per_task``, ``memory_mb``); every node needs this
-project installed at the same version (and the path of ``extra_python_path``, if any).
+The pool keeps one Ray actor per evaluation slot of the cluster (its CPUs divided by the CPUs
+an evaluation reserves). Each actor holds an :class:`~sga_agent.sandbox.EvaluationSlot` on its
+node: a confined capture server and a trusted fit worker, started once and kept warm from
+candidate to candidate, exactly as the local pool keeps its slots. An evaluation therefore
+costs on a node what it costs here, with the same limits, isolation, timeouts and outcomes; its
+``extras`` name the node (``node``). Ray places the actors from the resources each reserves
+(``cpus_per_task``, ``memory_mb``); every node needs this project installed at the same version
+(and the path of ``extra_python_path``, if any).
 
 Failures
 --------
-A task whose Ray worker process or node dies is retried once (:data:`TASK_RETRIES`, Ray's
-``max_retries``; the capture server and fit worker die with their Ray worker, so nothing is
-left running). If the retry is lost too, or Ray cannot run the task at all, its future holds an
-invalid :class:`~sga_agent.task.Evaluation` whose reason names Ray and its error: status
-"crashed" for a lost worker, node or result, "out_of_memory" when Ray's memory monitor killed
-the worker, "error" otherwise; the search records it as any other outcome. One failure is not
-an outcome of the candidate: when the Ray node of the search's own machine stops (the cluster
-was shut down, or its head node died), every later task would fail too, so the futures raise
-:class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded,
-and ``sga-agent resume`` evaluates them once a cluster is back.
+A candidate is not blamed for its slot: when an actor's process or node dies while it
+evaluates, the candidate is evaluated once more on another slot, and its ``extras["retried"]``
+says why; a replacement actor is started in the background. If the second slot dies too, its
+future holds an invalid :class:`~sga_agent.task.Evaluation` with status "crashed" whose reason
+names Ray and its error ("error" when Ray cannot run it at all); the search records it as any
+other outcome. One failure is not an
+outcome of the candidate: when the Ray node of the search's own machine stops (the cluster was
+shut down, or its head node died), every later evaluation would fail too, so the futures raise
+:class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded, and
+``sga-agent resume`` evaluates them once a cluster is back.
 
-The search must run on a node of the cluster (usually the head), as every Ray driver does.
+The search must run on a node of the cluster (usually the head), as every Ray driver does. Ray's
+own messages about lost workers and nodes go to its log files, not to the search's screen.
 
 Ray is an optional dependency (:data:`RAY_INSTALL`), imported when a pool is created.
 """
 
 from __future__ import annotations
 
-import functools
+import contextlib
+import json
 import logging
+import math
 import os
+import queue
 import socket
 import threading
 from collections.abc import Sequence
-from concurrent.futures import Future, wait
+from concurrent.futures import Future, ThreadPoolExecutor
 from types import ModuleType
 from typing import Any
 
 from sga_agent.isolation import Isolation, detect_isolation
-from sga_agent.sandbox import SandboxLimits, _settings_json, evaluate_in_sandbox
+from sga_agent.sandbox import EvaluationSlot, SandboxLimits, _settings_json
 from sga_agent.task import Evaluation, EvaluationSettings
 
 #: How to install the optional dependency.
 RAY_INSTALL = 'pip install "sga-agent[ray]"'
-#: Retries of a task whose Ray worker or node died (failures of the candidate are not retried).
-TASK_RETRIES = 1
+#: Further slots a candidate is tried on when its slot's process or node dies meanwhile
+#: (failures of the candidate itself are never retried).
+SLOT_RETRIES = 1
+#: Seconds a replacement slot may take to be placed and answer before it is given up.
+REPLACEMENT_TIMEOUT_S = 300.0
+#: Seconds the slots may take to stop their helpers when the pool closes.
+CLOSE_TIMEOUT_S = 60.0
 #: Seconds to wait for a TCP connection to the head node before giving up on it.
 CONNECT_TIMEOUT_S = 10.0
 
@@ -70,7 +81,7 @@ def import_ray() -> ModuleType:
 
 
 class RayPool:
-    """Evaluate candidates as Ray tasks, each captured and fitted on a node of the cluster.
+    """Evaluate candidates on the slots of a Ray cluster, each a warm actor on a node.
 
     Same interface as :class:`~sga_agent.sandbox.SandboxPool`. If this process is already
     connected to Ray (``ray.init`` was called), that connection is used and left open;
@@ -83,11 +94,12 @@ class RayPool:
         ``RAY_ADDRESS``, else a cluster started on this machine with ``ray start``). None
         starts a private local Ray instance with ``local_cpus`` CPUs, stopped by :meth:`close`.
     limits : SandboxLimits
-        Limits of every evaluation, applied on the node.
+        Limits of every evaluation, applied on the node (``limits.threads`` should match
+        ``cpus_per_task``: the threads of the fit's parallel loops).
     cpus_per_task : float
-        CPUs each evaluation reserves on its node (Ray's ``num_cpus``).
+        CPUs each slot reserves on its node (Ray's ``num_cpus``).
     memory_mb : int, optional
-        Memory each evaluation reserves on its node in MiB (Ray's ``memory``; a scheduling
+        Memory each slot reserves on its node in MiB (Ray's ``memory``; a scheduling
         reservation, the enforced limit is ``limits.memory_mb``).
     local_cpus : int, optional
         CPUs of the local instance (default: this machine's); ignored with an address.
@@ -115,11 +127,9 @@ class RayPool:
         self.cpus_per_task = cpus_per_task
         self.memory_mb = memory_mb
         self.extra_python_path = tuple(os.path.abspath(path) for path in extra_python_path)
-        self._options: dict[str, Any] = {"num_cpus": cpus_per_task, "max_retries": TASK_RETRIES}
+        self._options: dict[str, Any] = {"num_cpus": cpus_per_task}
         if memory_mb is not None:
             self._options["memory"] = memory_mb * 2**20
-        self._pending: dict[Future[Evaluation], Any] = {}  # our future -> its ObjectRef
-        self._lock = threading.Lock()
         self._connected_here = not self._ray.is_initialized()
         if self._connected_here:
             _connect(self._ray, address, local_cpus)
@@ -128,13 +138,29 @@ class RayPool:
         except RayUnavailableError:
             self.close()
             raise
-        self._evaluate = self._ray.remote(**self._options)(_evaluate_on_node)
+        self._actor_class = self._ray.remote(**self._options)(NodeSlot)
+        self._lock = threading.Lock()
+        self._free: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._slots: list[Any] = []  # every actor started, live or starting
+        self._starting = 0  # replacements not ready yet
+        self._warm: set[tuple[str, str]] = set()  # (task, options) the slots were warmed for
+        self._closed = False
+        for _ in range(self._slot_count()):
+            actor = self._actor_class.remote(self.limits, self.extra_python_path)
+            self._slots.append(actor)
+            self._free.put(actor)
+        self._executor = ThreadPoolExecutor(len(self._slots), thread_name_prefix="sga-ray")
+
+    def _slot_count(self) -> int:
+        """Slots the cluster's CPUs hold (at least one: the feasibility check passed)."""
+        cpus = self._ray.cluster_resources().get("CPU", 0.0)
+        return max(1, math.floor(cpus / self.cpus_per_task + 1e-9))
 
     def isolation(self) -> Isolation:
         """How the workers are isolated, for the run's record (probed on one Ray node)."""
         if not self.limits.isolation:
             return Isolation.none("disabled (SandboxLimits.isolation=False)")
-        probe = self._ray.remote(**self._options)(_node_isolation)
+        probe = self._ray.remote(num_cpus=0)(_node_isolation)
         try:
             return self._ray.get(probe.remote())
         except self._ray.exceptions.LocalRayletDiedError as error:
@@ -152,6 +178,7 @@ class RayPool:
             "cpus": ray.cluster_resources().get("CPU", 0.0),
             "cpus_per_task": self.cpus_per_task,
             "memory_mb_per_task": self.memory_mb,
+            "slots": len(self._slots),
         }
 
     def _check_feasible(self) -> None:
@@ -172,32 +199,115 @@ class RayPool:
         """Start evaluating one solution on the cluster; the future's result is its Evaluation.
 
         Raises ``TypeError`` at once if ``settings.options`` is not JSON-serialisable; a bad
-        candidate or a lost Ray task never raises: its future holds an invalid Evaluation
+        candidate or a lost Ray slot never raises: its future holds an invalid Evaluation
         (only the loss of this machine's Ray node makes it raise :class:`RayClusterLostError`).
         """
-        _settings_json(settings)  # the sandbox's own check, here
-        reference = self._evaluate.remote(
-            task, solution, settings, self.limits, self.extra_python_path
-        )
-        result: Future[Evaluation] = Future()
+        options = json.dumps(_settings_json(settings)["options"], sort_keys=True)
+        self._warm_up(task, options)
+        return self._executor.submit(self._evaluate, task, solution, settings)
+
+    def _warm_up(self, task: str, options: str) -> None:
+        """Have every slot start its helpers for ``task`` and ``options``, once: they load
+        while the first candidates are captured, so no slot's first candidate waits for them."""
         with self._lock:
-            self._pending[result] = reference
-        reference.future().add_done_callback(functools.partial(self._settle, result))
-        return result
+            if (task, options) in self._warm:
+                return
+            self._warm.add((task, options))
+            slots = list(self._slots)
+        for actor in slots:
+            actor.start_helpers.remote(task, options)
+
+    def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+        """One candidate on a free slot; once more on another if the slot dies meanwhile."""
+        retried = ""
+        for attempt in range(1 + SLOT_RETRIES):
+            actor = self._take_slot()
+            if actor is None:
+                return Evaluation.invalid(
+                    "lost on Ray: no slot of the cluster is left to evaluate it", status="crashed"
+                )
+            try:
+                evaluation = self._ray.get(actor.evaluate.remote(task, solution, settings))
+            except self._ray.exceptions.LocalRayletDiedError as error:
+                raise _cluster_lost(error) from error
+            except self._ray.exceptions.RayActorError as error:
+                self._replace(actor)
+                if attempt < SLOT_RETRIES:
+                    retried = f"its Ray slot died ({type(error).__name__}: {_first_line(error)})"
+                    continue
+                return _lost(self._ray, error)
+            except Exception as error:  # Ray could not run it at all
+                self._free.put(actor)
+                return _lost(self._ray, error)
+            self._free.put(actor)
+            if retried:
+                evaluation.extras["retried"] = retried
+            return evaluation
+        raise AssertionError("unreachable")
+
+    def _take_slot(self) -> Any | None:
+        """A free slot, waiting for one; None when no slot is left or starting."""
+        while True:
+            try:
+                return self._free.get(timeout=1.0)
+            except queue.Empty:
+                with self._lock:
+                    if self._closed or (not self._slots and not self._starting):
+                        return None
+
+    def _replace(self, dead: Any) -> None:
+        """Forget a dead slot and start another in the background; it joins the free slots
+        once Ray has placed it and it answers (never, if the cluster has no room left)."""
+        with self._lock:
+            if dead in self._slots:
+                self._slots.remove(dead)
+            if self._closed:
+                return
+            self._starting += 1
+            warm = set(self._warm)
+        threading.Thread(target=self._start_replacement, args=(warm,), daemon=True).start()
+
+    def _start_replacement(self, warm: set[tuple[str, str]]) -> None:
+        actor = self._actor_class.remote(self.limits, self.extra_python_path)
+        try:
+            ready, _ = self._ray.wait([actor.node.remote()], timeout=REPLACEMENT_TIMEOUT_S)
+        except Exception:  # the cluster went away meanwhile
+            ready = []
+        with self._lock:
+            self._starting -= 1
+            if not ready or self._closed:
+                self._ray.kill(actor)
+                return
+            self._slots.append(actor)
+        for task, options in warm:
+            actor.start_helpers.remote(task, options)
+        self._free.put(actor)
 
     def close(self, wait_for_pending: bool = True) -> None:
-        """Wait for running evaluations (or cancel them), then disconnect if connected here.
+        """Wait for running evaluations (or cancel them), stop every slot's helpers, then
+        disconnect if connected here.
 
-        Disconnecting stops a local instance the pool started, and ends the pool's tasks on a
-        cluster; a connection made before the pool stays open.
+        Disconnecting stops a local instance the pool started; a connection made before the
+        pool stays open.
         """
-        with self._lock:
-            pending = dict(self._pending)
-        if wait_for_pending:
-            wait(pending)
-        elif not self._connected_here:
-            for reference in pending.values():
-                self._ray.cancel(reference, force=True)
+        executor = getattr(self, "_executor", None)
+        if executor is not None:
+            if not wait_for_pending:
+                with self._lock:
+                    self._closed = True
+                    slots = list(self._slots)
+                for actor in slots:  # running evaluations end at once, invalid
+                    self._ray.kill(actor)
+            executor.shutdown(wait=True, cancel_futures=not wait_for_pending)
+            with self._lock:
+                self._closed = True
+                slots, self._slots = list(self._slots), []
+            if wait_for_pending:
+                closing = [actor.close.remote() for actor in slots]
+                with contextlib.suppress(Exception):
+                    self._ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
+                for actor in slots:
+                    self._ray.kill(actor)
         if self._connected_here and self._ray.is_initialized():
             self._ray.shutdown()
 
@@ -207,18 +317,42 @@ class RayPool:
     def __exit__(self, exc_type: type[BaseException] | None, *exc_info: object) -> None:
         self.close(wait_for_pending=exc_type is None)
 
-    def _settle(self, result: Future[Evaluation], ray_future: Future[Evaluation]) -> None:
-        """Resolve ``result`` from the Ray task's outcome; a Ray failure becomes an Evaluation."""
-        with self._lock:
-            self._pending.pop(result, None)
+
+class NodeSlot:
+    """The Ray actor of one slot: an :class:`~sga_agent.sandbox.EvaluationSlot` on its node,
+    whose capture server and fit worker stay warm from one candidate to the next."""
+
+    def __init__(self, limits: SandboxLimits, extra_python_path: tuple[str, ...]) -> None:
+        self._slot = EvaluationSlot(limits, extra_python_path)
+        self._node = socket.gethostname()
+        with contextlib.suppress(Exception):
+            import ray
+
+            self._node = ray.util.get_node_ip_address()
+
+    def node(self) -> str:
+        """The address of this slot's node (also: the actor is placed and answers)."""
+        return self._node
+
+    def start_helpers(self, task: str, options: str) -> None:
+        """Start the helpers without waiting for them (see EvaluationSlot.start_helpers)."""
+        with contextlib.suppress(OSError):  # the evaluation that needs them will report it
+            self._slot.start_helpers(task, options)
+
+    def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+        """One sandboxed evaluation on this node (never raises); its extras name the node."""
         try:
-            evaluation = ray_future.result()
-        except self._ray.exceptions.LocalRayletDiedError as error:
-            result.set_exception(_cluster_lost(error))
-            return
-        except Exception as error:  # the task was lost (after its retry) or never ran
-            evaluation = _lost(self._ray, error)
-        result.set_result(evaluation)
+            evaluation = self._slot.evaluate(task, solution, settings)
+        except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
+            reason = f"the sandbox failed on Ray node {self._node}: "
+            evaluation = Evaluation.invalid(f"{reason}{type(error).__name__}: {error}",
+                                            status="error")  # fmt: skip
+        evaluation.extras["node"] = self._node
+        return evaluation
+
+    def close(self) -> None:
+        """Stop the helpers, letting them exit normally (Taichi writes its kernel cache)."""
+        self._slot.close()
 
 
 def _connect(ray: ModuleType, address: str | None, local_cpus: int | None) -> None:
@@ -246,39 +380,24 @@ def _connect(ray: ModuleType, address: str | None, local_cpus: int | None) -> No
         ) from error
 
 
-def _evaluate_on_node(
-    task: str,
-    solution: str,
-    settings: EvaluationSettings,
-    limits: SandboxLimits,
-    extra_python_path: tuple[str, ...],
-) -> Evaluation:
-    """The Ray task: one sandboxed evaluation on this node (never raises)."""
-    try:
-        return evaluate_in_sandbox(
-            task, solution, settings, limits, extra_python_path=extra_python_path
-        )
-    except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
-        reason = f"the sandbox failed on Ray node {socket.gethostname()}: "
-        return Evaluation.invalid(f"{reason}{type(error).__name__}: {error}", status="error")
-
-
 def _node_isolation() -> Isolation:
     """The Ray task probing a node's isolation."""
     return detect_isolation()
 
 
 def _lost(ray: ModuleType, error: Exception) -> Evaluation:
-    """The evaluation of a Ray task that failed (its retry included) or never ran."""
+    """The evaluation of a candidate whose slots died (its retry included) or that Ray could
+    not run."""
     described = f"{type(error).__name__}: {_first_line(error)}"
     if isinstance(error, ray.exceptions.OutOfMemoryError):
         reason = f"Ray's memory monitor killed the worker evaluating it ({described})"
         return Evaluation.invalid(reason, status="out_of_memory")
     exceptions = ray.exceptions
-    lost = (exceptions.WorkerCrashedError, exceptions.NodeDiedError, exceptions.ObjectLostError)
+    lost = (exceptions.RayActorError, exceptions.WorkerCrashedError, exceptions.NodeDiedError,
+            exceptions.ObjectLostError)  # fmt: skip
     if isinstance(error, lost):
-        tries = f"tried {1 + TASK_RETRIES} times"
-        reason = f"lost on Ray: the worker or node evaluating it died ({tries}; {described})"
+        tries = f"tried on {1 + SLOT_RETRIES} slots"
+        reason = f"lost on Ray: the slot or node evaluating it died ({tries}; {described})"
         return Evaluation.invalid(reason, status="crashed")
     return Evaluation.invalid(f"Ray could not evaluate it ({described})", status="error")
 

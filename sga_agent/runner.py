@@ -86,11 +86,12 @@ def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
     sga_agent.ray_executor.RayUnavailableError
         The ray executor without Ray installed, or with no cluster at ``config.ray_address``.
     """
-    limits = SandboxLimits(
-        timeout_s=config.timeout_s,
-        memory_mb=config.memory_mb,
-        threads=threads_per_worker(config.workers) if config.executor == "local" else 1,
-    )
+    if config.executor == "local":
+        threads = threads_per_worker(config.workers)
+    else:  # the CPUs a Ray slot reserves are the threads of its fit's parallel loops
+        threads = max(1, math.floor(config.ray_cpus_per_task))
+    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb,
+                           threads=threads)  # fmt: skip
     if config.executor == "local":
         return SandboxPool(max_workers=config.workers, limits=limits)
     return RayPool(

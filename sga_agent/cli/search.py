@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -170,7 +171,7 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
         )
     config = runner.with_preferred_options(config, chosen)
     store = RunStore.create(out, config, {"proposer": proposer})
-    execute(config, store, as_json, chosen)
+    execute(config, store, as_json, chosen, new_run=True)
 
 
 def check_executor(config: SearchConfig) -> None:
@@ -197,8 +198,11 @@ def make_proposer(config: SearchConfig):
     return proposer
 
 
-def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> None:
-    """Run with a progress display, then print the result."""
+def execute(
+    config: SearchConfig, store: RunStore, as_json: bool, proposer, new_run: bool = False
+) -> None:
+    """Run with a progress display, then print the result. A ``new_run`` whose cluster
+    cannot be reached before anything was evaluated leaves no run folder behind."""
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
         console.print(f"run folder: {store.path}", soft_wrap=True)
@@ -210,7 +214,12 @@ def execute(config: SearchConfig, store: RunStore, as_json: bool, proposer) -> N
             SearchProgress(console, config, recorded) as progress,
         ):
             result = runner.run(config, store, progress, proposer)
-    except (RayUnavailableError, ProposerError) as error:  # no cluster, no model: stop
+    except RayUnavailableError as error:  # no cluster: stop
+        if new_run and not store.recorded().evaluations:  # it never started
+            shutil.rmtree(store.path, ignore_errors=True)
+            raise click.ClickException(f"{error}\nno run was started") from error
+        raise click.ClickException(f"{error}\n{resume}") from error
+    except ProposerError as error:  # no model: stop
         raise click.ClickException(f"{error}\n{resume}") from error
     except KeyboardInterrupt:
         finished = len(store.recorded().evaluations)

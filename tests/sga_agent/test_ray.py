@@ -115,14 +115,25 @@ def double_task(monkeypatch):
 
 
 def outcomes(store: RunStore) -> dict[str, dict]:
-    """Every candidate's recorded evaluation, without its wall times."""
+    """Every candidate's recorded evaluation, without its wall times and Ray node."""
     recorded = {}
     for folder in sorted((store.path / "candidates").iterdir()):
         evaluation = json.loads((folder / "evaluation.json").read_text())
         del evaluation["seconds"]
         evaluation["extras"].pop("capture_seconds", None)
+        evaluation["extras"].pop("node", None)
         recorded[folder.name] = evaluation
     return recorded
+
+
+def nodes(store: RunStore) -> dict[str, str]:
+    """The Ray node each evaluated candidate's record names (duplicates name none)."""
+    found = {}
+    for folder in sorted((store.path / "candidates").iterdir()):
+        extras = json.loads((folder / "evaluation.json").read_text())["extras"]
+        if "node" in extras:
+            found[folder.name] = extras["node"]
+    return found
 
 
 def sandbox_event(store: RunStore) -> dict:
@@ -156,6 +167,9 @@ def test_a_search_through_ray_matches_the_local_pool(tmp_path, double_task):
         "02-explore-01": "ok",
     }  # fmt: skip
     assert outcomes(remote)["02-explore-01"]["extras"] == {"duplicate_of": "01-exploit-00"}
+    assert set(nodes(remote).values()) == {ray_node_address()} and not nodes(local)
+    evaluated = {"00-seed", "01-exploit-00", "01-explore-00", "02-exploit-00", "02-explore-00"}
+    assert evaluated <= set(nodes(remote)) and "01-explore-01" not in nodes(remote)  # no code
     assert [e.summary() for e in ray_result.top] == [e.summary() for e in local_result.top]
     for name in ("heap/iteration-01.json", "heap/iteration-02.json"):
         assert (remote.path / name).read_text() == (local.path / name).read_text()
@@ -167,6 +181,14 @@ def test_a_search_through_ray_matches_the_local_pool(tmp_path, double_task):
     assert local_event["executor"] == "local" and ray_event["executor"] == "ray"
     assert ray_event["isolation"] == local_event["isolation"]  # probed on the (local) node
     assert ray_event["cpus"] == 2 and ray_event["nodes"] == 1  # sized by --workers 2
+    assert ray_event["slots"] == 2
+
+
+def ray_node_address() -> str:
+    """The address a Ray node on this machine reports (Ray's own choice of interface)."""
+    import ray
+
+    return ray.util.get_node_ip_address()
 
 
 def sandbox_workers(folder: Path) -> list[tuple[int, int, str]]:
@@ -191,7 +213,7 @@ def kill_ray_workers(search: Future, waiting: str, hanging: str, release: Path) 
     worker of ``hanging`` every time (the first try and its retry). Returns the killed pids."""
     killed: dict[str, list[int]] = {"waiting": [], "hanging": []}
     seen: set[int] = set()
-    deadline = time.monotonic() + 90
+    deadline = time.monotonic() + 240  # replacement slots start a Ray worker and helpers each
     while not search.done() and time.monotonic() < deadline:
         for pid, ray_worker, solution in sandbox_workers(release.parent):
             if pid in seen:
@@ -211,7 +233,9 @@ def kill_ray_workers(search: Future, waiting: str, hanging: str, release: Path) 
 
 @pytest.mark.slow
 @needs_ray
-def test_killed_ray_workers_are_retried_once_then_recorded_as_crashed(tmp_path, double_task):
+def test_a_candidate_whose_ray_slot_dies_is_retried_once_then_recorded_as_crashed(
+    tmp_path, double_task
+):
     import ray
 
     from sga_agent.ray_executor import RayPool, RayUnavailableError
@@ -236,8 +260,9 @@ def test_killed_ray_workers_are_retried_once_then_recorded_as_crashed(tmp_path, 
     evaluations = outcomes(store)
     retried, lost = evaluations["01-exploit-00"], evaluations["01-explore-00"]
     assert retried["status"] == "ok" and retried["loss"] == 0.5
+    assert "its Ray slot died (ActorDiedError" in retried["extras"]["retried"]
     assert lost["status"] == "crashed" and lost["valid"] is False
-    assert "lost on Ray" in lost["reason"] and "WorkerCrashedError" in lost["reason"]
+    assert "lost on Ray" in lost["reason"] and "ActorDiedError" in lost["reason"]
     assert result.best.candidate == "01-exploit-00" and result.totals.evaluations == 3
 
 
@@ -369,3 +394,15 @@ def test_resume_takes_a_ray_address_only_for_a_ray_run(tmp_path):
     store = RunStore.create(tmp_path, SearchConfig(task="elastic", proposer="builtin"), {})
     result = CliRunner().invoke(main, ["resume", str(store.path), "--ray-address", "h:6379"])
     assert result.exit_code == 2 and "only apply to executor 'ray'" in result.output
+
+
+@needs_ray
+def test_a_search_whose_cluster_cannot_be_reached_leaves_no_run_folder(tmp_path):
+    result = CliRunner().invoke(main, [
+        "search", "--task", "elastic", "--executor", "ray", "--ray-address", "127.0.0.1:1",
+        "--out-dir", str(tmp_path),
+    ])  # fmt: skip
+    assert result.exit_code == 1
+    assert "no Ray head node answers at 127.0.0.1:1" in result.output
+    assert "no run was started" in result.output and "sga-agent resume" not in result.output
+    assert not any(tmp_path.iterdir())
