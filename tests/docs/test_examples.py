@@ -115,8 +115,8 @@ def test_sysid_cube():
 @pytest.mark.slow
 def test_the_plugin_tutorial(tmp_path: Path):
     """The tutorial's commands: pip installs the plugin, sga-agent lists it, evaluates a
-    solution and searches it with the plugin's own proposer (capture and fit processes
-    included)."""
+    solution, searches with the plugin's own proposer (capture and fit processes included)
+    and replays the recorded search."""
     source = shutil.copytree(EXAMPLES / "numbers_plugin", tmp_path / "numbers_plugin")
     site = tmp_path / "site"
     subprocess.run(
@@ -140,3 +140,9 @@ def test_the_plugin_tutorial(tmp_path: Path):
                    cwd=tmp_path, env=env)  # fmt: skip
     assert "25 evaluations (25 ok)" in searched
     assert_shown_on_the_site("numbers_search", searched)
+
+    recorded = re.search(r"^run folder: (\S+)$", searched, re.MULTILINE).group(1)
+    replay = [*agent, "search", "--task", "numbers", "--replay", recorded, "--out-dir", "replayed"]
+    replayed = run(replay, cwd=tmp_path, env=env)
+    best = re.compile(r"^best: .*$", re.MULTILINE)
+    assert best.search(replayed).group(0) == best.search(searched).group(0)
