@@ -37,7 +37,7 @@ import torch
 from torch import fx, nn
 
 from bridges import closed_form, linalg, products, scalar_law
-from tasks.constitutive import law_ops
+from tasks.constitutive import law_cost, law_ops
 
 FORMAT = law_ops.GRAPH_FORMAT
 MAX_NODES = 4000
@@ -120,10 +120,16 @@ class LawGraph:
 def build_law(data: Any, dtype: torch.dtype) -> GraphLaw:
     """The module computing the captured law ``data``, its floats in ``dtype``.
 
-    Raises :class:`LawGraphError` for anything wrong with ``data``, whatever fails first.
+    Raises :class:`LawGraphError` for anything wrong with ``data``, whatever fails first,
+    and for a law whose estimated cost is past :mod:`~tasks.constitutive.law_cost`'s budgets
+    (sized on shapes alone, before any fit: refused in well under a second).
     """
     try:
-        return GraphLaw(LawGraph.from_json(data), dtype)
+        graph = LawGraph.from_json(data)
+        law_cost.check_cost(graph, aten_operation)
+        return GraphLaw(graph, dtype)
+    except law_cost.CostRefused as error:
+        raise LawGraphError(str(error)) from None
     except LawGraphError:
         raise
     except (ValueError, TypeError, IndexError, KeyError, AttributeError, RuntimeError,
@@ -240,14 +246,24 @@ def _target(op: str) -> Any:
         return closed_form_inverse
     if name == "bmm" and overload_name == "default":
         return batched_product
+    overload = aten_operation(op)
+    if name in law_ops.ZERO_FILLED:
+        return _ZeroFilled(overload)
+    return overload
+
+
+def aten_operation(op: str) -> Any:
+    """The ATen overload (or Python operator) an allowed operation name stands for, as ATen
+    defines it; :class:`LawGraphError` if torch has none or it writes into its arguments."""
+    if op in law_ops.PYTHON_OPS:
+        return law_ops.PYTHON_OPS[op]
+    _, name, overload_name = op.split(".")
     packet = getattr(torch.ops.aten, name, None)
     overload = getattr(packet, overload_name, None) if packet is not None else None
     if not isinstance(overload, torch._ops.OpOverload):
         raise LawGraphError("the graph names an operation torch does not have")
     if overload._schema.is_mutable:
         raise LawGraphError(f"{op} writes into its arguments, which is not allowed")
-    if name in law_ops.ZERO_FILLED:
-        return _ZeroFilled(overload)
     return overload
 
 

@@ -6,7 +6,8 @@ module docstring describes the attack (``Attack:``) and what it aims at (``Targe
 with header lines::
 
     expected: refused | honest
-    category: monkeypatch | subclass | mode | hook | forge | process | cache | secret | names
+    category: monkeypatch | subclass | mode | hook | forge | process | cost | cache | secret |
+      names
     static: passes | rejected
     task: granular | elastic          (optional; granular when absent)
     check: what a harness must verify beyond the outcome (optional, repeatable;
@@ -31,8 +32,8 @@ from pathlib import Path
 
 CANDIDATES = Path(__file__).parent / "candidates"
 EXPECTED = ("refused", "honest")
-CATEGORIES = ("monkeypatch", "subclass", "mode", "hook", "forge", "process", "cache", "secret",
-              "names")  # fmt: skip
+CATEGORIES = ("monkeypatch", "subclass", "mode", "hook", "forge", "process", "cost", "cache",
+              "secret", "names")  # fmt: skip
 STATIC = ("passes", "rejected")
 TASKS = ("granular", "elastic")
 #: The secret the tests plant in /root/.sga-hostile-secret (and in the caller's environment).

@@ -8,7 +8,7 @@ does not notice; the trusted fit, which runs the graph, must bound sizes itself.
 Target: memory of the trusted fit process (and of the host, if it is unlimited).
 
 expected: refused
-category: process
+category: cost
 static: passes
 check: the trusted fit process survives, within its own memory limit
 """

@@ -7,7 +7,7 @@ sizes a node asks for lets them reach the trusted fit.
 Target: memory of the trusted fit process.
 
 expected: refused
-category: process
+category: cost
 static: passes
 check: the trusted fit process survives, within its own memory limit
 """

@@ -539,6 +539,7 @@ def test_an_exactly_singular_input_is_refused_as_torch_refuses_it():
 
 def test_a_graph_reading_the_lu_factors_of_its_determinant_keeps_atens():
     def det_graph(read: int) -> dict:
+        side = 3 if read else 1  # the LU factors, (B, 3, 3); or the determinant again, (B,)
         return {
             "format": 1,
             "parameters": [],
@@ -548,9 +549,10 @@ def test_a_graph_reading_the_lu_factors_of_its_determinant_keeps_atens():
                 {"op": "operator.getitem", "args": [{"node": 0}, 0], "kwargs": {}},
                 {"op": "operator.getitem", "args": [{"node": 0}, read], "kwargs": {}},
                 {"op": "aten.view.default", "args": [{"node": 1}, [-1, 1, 1]], "kwargs": {}},
-                {"op": "aten.mul.Tensor", "args": [{"node": 2}, {"node": 3}], "kwargs": {}},
+                {"op": "aten.view.default", "args": [{"node": 2}, [-1, side, side]], "kwargs": {}},
+                {"op": "aten.mul.Tensor", "args": [{"node": 4}, {"node": 3}], "kwargs": {}},
             ],
-            "output": {"node": 4},
+            "output": {"node": 5},
         }
 
     F = deformations(batch=4)
@@ -562,4 +564,4 @@ def test_a_graph_reading_the_lu_factors_of_its_determinant_keeps_atens():
     only_det = build_law(det_graph(0), torch.float64)  # getitem 0 twice: closed form
     assert closed_form_det in calls(only_det)
     det = torch.linalg.det(F)
-    assert torch.allclose(only_det(F), det * det.view(-1, 1, 1), rtol=1e-13)
+    assert torch.allclose(only_det(F), det.view(-1, 1, 1) ** 2, rtol=1e-13)
