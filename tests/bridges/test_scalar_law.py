@@ -7,9 +7,12 @@ gradients to round-off, including torch's conventions at the edges (a clamp at i
 at zero), and pass finite differences.
 """
 
+import gc
+
 import numpy as np
 import pytest
 import torch
+from taichi.lang import impl
 
 from bridges import scalar_law as sl
 
@@ -119,6 +122,18 @@ def test_a_law_without_parameters_and_constant_outputs():
     (grad,) = torch.autograd.grad(stress.sum(), [F])
     assert torch.equal(grad.reshape(5, 9)[:, :8], torch.full((5, 8), 2.0, dtype=torch.float64))
     assert torch.equal(grad.reshape(5, 9)[:, 8], torch.zeros(5, dtype=torch.float64))
+
+
+def test_a_collected_law_leaves_its_kernels_out_of_taichi_s_runtime():
+    kernels = impl.get_runtime().kernels
+    before = len(kernels)
+    program = sl.Program(9, 1)
+    law = sl.CompiledLaw(program, [x * program.parameters[0] for x in program.inputs])
+    assert len(kernels) == before + 4  # forward and reverse, each with Taichi's adjoint
+    listed = [id(k) for k in kernels[before:]]
+    del law
+    gc.collect()
+    assert len(kernels) == before and not set(listed) & {id(k) for k in kernels}
 
 
 def test_constants_fold_and_equal_operations_are_made_once():
