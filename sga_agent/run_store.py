@@ -10,33 +10,53 @@ Layout of ``runs/<id>/``::
                            left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
     summary.json           written when the run ends
+    run.lock               locked (``fcntl.flock``) by the one process that writes the run,
+                           for its lifetime; it holds that process's id
 
 ``events.jsonl`` is the source of truth: a run killed at any moment is resumed from it
 (:meth:`RunStore.recorded`), and a finished evaluation is never lost because its event is on
 disk before the next one starts. The folders are for people (and ``sga-agent report``).
+A full disk stops the run with :class:`RunFolderFull`: what was written stays readable (a line
+cut short is skipped when read back) and the run resumes once there is space again.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import math
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.task import Evaluation
 
-CONFIG, EVENTS, SUMMARY = "config.json", "events.jsonl", "summary.json"
+CONFIG, EVENTS, SUMMARY, LOCK = "config.json", "events.jsonl", "summary.json", "run.lock"
 #: A candidate's artifacts (what the trusted fit left for reports), beside its evaluation.
 ARTIFACTS = "artifacts.json"
 
 
 class RunStoreError(RuntimeError):
     """The run folder is missing, incomplete or from an incompatible version."""
+
+
+class RunLocked(RunStoreError):
+    """Another process is writing the run (a search or a resume of it)."""
+
+
+class RunFolderFull(RunStoreError):
+    """The run folder's disk is full (or its quota spent): the run stops, resumable."""
+
+
+#: Lock files this process holds, by run folder: held until the process ends.
+_HELD: dict[Path, IO[str]] = {}
 
 
 @dataclass
@@ -55,7 +75,28 @@ def _json_default(value: Any) -> Any:
 
 
 def _dump(path: Path, data: Any) -> None:
-    path.write_text(json.dumps(data, indent=2, default=_json_default) + "\n", encoding="utf-8")
+    _write(path, json.dumps(data, indent=2, default=_json_default) + "\n")
+
+
+def _write(path: Path, text: str) -> None:
+    with _space(path):
+        path.write_text(text, encoding="utf-8")
+
+
+@contextmanager
+def _space(path: Path) -> Iterator[None]:
+    """Turn a full disk while writing ``path`` into :class:`RunFolderFull`."""
+    try:
+        yield
+    except OSError as error:
+        if error.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        run = next((folder for folder in path.parents if (folder / EVENTS).exists()), path.parent)
+        raise RunFolderFull(
+            f"the run folder's disk is full ({path.name} could not be written: "
+            f"{error.strerror}); the search stopped and every finished evaluation is kept: free "
+            f"some space, then `sga-agent resume {run}` continues the run"
+        ) from error
 
 
 class RunStore:
@@ -78,6 +119,7 @@ class RunStore:
             path = parent / f"{config.task}-{stamp}-{suffix}"
         path.mkdir(parents=True)
         store = cls(path)
+        store.lock()
         _dump(path / CONFIG, {"config": config.to_dict(), **meta})
         store.append(ev.RunStarted(meta))
         return store
@@ -91,6 +133,39 @@ class RunStore:
                 "that `sga-agent search` printed"
             )
         return store
+
+    def lock(self) -> None:
+        """Become the one process that writes this run, until it ends (``fcntl.flock`` on
+        ``run.lock``; the kernel releases it however the process ends). Raises
+        :class:`RunLocked`, naming the holder's process id, when another process holds it."""
+        key = self.path.resolve()
+        if key in _HELD:
+            return
+        handle = open(self.path / LOCK, "a+", encoding="utf-8")  # noqa: SIM115 (kept open)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            handle.close()
+            raise RunLocked(
+                f"{self.path} is being written by another process (pid {holder}): a run is "
+                "searched or resumed by one process at a time; wait for it to end, or stop it "
+                f"(kill -INT {holder}) and resume then"
+            ) from None
+        try:
+            handle.truncate(0)
+            handle.write(f"{os.getpid()}\n")
+            handle.flush()
+        except OSError:
+            pass  # a full disk: the lock holds all the same, without its pid
+        _HELD[key] = handle
+
+    def unlock(self) -> None:
+        """Let another process write this run (a no-op unless this process holds it)."""
+        handle = _HELD.pop(self.path.resolve(), None)
+        if handle is not None:
+            handle.close()
 
     def config(self) -> SearchConfig:
         data = json.loads((self.path / CONFIG).read_text(encoding="utf-8"))
@@ -107,7 +182,7 @@ class RunStore:
         """
         data = event.to_dict() if isinstance(event, ev.Event) else event
         line = json.dumps({"time": time.time(), **data}, default=_json_default)
-        with open(self.path / EVENTS, "a+b") as log:
+        with _space(self.path / EVENTS), open(self.path / EVENTS, "a+b") as log:
             if log.tell() > 0:
                 log.seek(-1, os.SEEK_END)
                 if log.read(1) != b"\n":
@@ -143,7 +218,8 @@ class RunStore:
 
     def candidate_dir(self, candidate: str) -> Path:
         path = self.path / "candidates" / candidate
-        path.mkdir(parents=True, exist_ok=True)
+        with _space(path):
+            path.mkdir(parents=True, exist_ok=True)
         return path
 
     def save_proposal(
@@ -152,13 +228,13 @@ class RunStore:
         folder = self.candidate_dir(candidate)
         if messages is not None:
             _dump(folder / "messages.json", messages)
-        (folder / "response.txt").write_text(proposal.get("text", ""), encoding="utf-8")
+        _write(folder / "response.txt", proposal.get("text", ""))
         _dump(folder / "proposal.json", {k: v for k, v in proposal.items() if k != "text"})
 
     def save_evaluation(self, candidate: str, code: str | None, evaluation: Evaluation) -> None:
         folder = self.candidate_dir(candidate)
         if code is not None:
-            (folder / "code.py").write_text(code, encoding="utf-8")
+            _write(folder / "code.py", code)
         data = evaluation.to_dict()
         curves = data.pop("curves")
         artifacts = data.pop("artifacts")
@@ -166,11 +242,12 @@ class RunStore:
         _dump(folder / "curves.json", curves)
         if artifacts:
             _dump(folder / ARTIFACTS, artifacts)
-        (folder / "feedback.txt").write_text(evaluation.feedback, encoding="utf-8")
+        _write(folder / "feedback.txt", evaluation.feedback)
 
     def save_heap(self, iteration: int, top: list[dict[str, Any]]) -> None:
         folder = self.path / "heap"
-        folder.mkdir(exist_ok=True)
+        with _space(folder):
+            folder.mkdir(exist_ok=True)
         _dump(folder / f"iteration-{iteration:02d}.json", top)
 
     def save_summary(self, summary: dict[str, Any]) -> None:

@@ -11,7 +11,7 @@ from sga_agent.cli import main
 from sga_agent.cli.search import check_executor, execute, make_proposer
 from sga_agent.config import ConfigError
 from sga_agent.events import RunResumed
-from sga_agent.run_store import RunStore, RunStoreError
+from sga_agent.run_store import RunFolderFull, RunLocked, RunStore, RunStoreError
 
 
 @main.command()
@@ -23,13 +23,19 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     """Continue the search recorded in RUN_DIR.
 
     Recorded model answers are not asked again and finished evaluations are not re-run; the
-    search goes on from where it stopped with the run's own settings (and executor).
+    search goes on from where it stopped with the run's own settings (and executor). A run is
+    written by one process at a time: resuming a run that a search or another resume is
+    writing stops at once, naming that process.
     """
     try:
         store = RunStore.open(run_dir)
         config = store.config()
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
+    try:
+        store.lock()  # before anything is written: two resumes never interleave
+    except RunLocked as error:
+        raise click.ClickException(str(error)) from error
     if ray_address is not None:
         try:
             config = dataclasses.replace(config, ray_address=ray_address)
@@ -39,5 +45,8 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     proposer = make_proposer(config)
     if store.recorded().finished:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
-    store.append(RunResumed(ray_address))
-    execute(config, store, as_json, proposer)
+    try:
+        store.append(RunResumed(ray_address))
+        execute(config, store, as_json, proposer)
+    except RunFolderFull as error:  # the disk is full: stop with what to do
+        raise click.ClickException(str(error)) from error
