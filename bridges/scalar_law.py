@@ -631,20 +631,28 @@ def apply_law(
     return _LawFunction.apply(F, law, *parameters)
 
 
+def _rows(F: torch.Tensor, law: CompiledLaw) -> torch.Tensor:
+    """The law's (N, inputs) rows of ``F``, contiguous, as its kernels read them."""
+    return F.detach().reshape(-1, law.inputs).contiguous()
+
+
 class _LawFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, F, law: CompiledLaw, *parameters):
-        rows = F.detach().reshape(-1, law.inputs).contiguous()
+        rows = _rows(F, law)
         flat = flat_parameters(parameters, rows)
         ctx.law, ctx.shape = law, F.shape
         out = law.forward(rows, flat)
-        ctx.save_for_backward(rows, flat, out[:, law.outputs :], *parameters)
+        # F itself, not its rows: F is a view of the step's output or the step's own input,
+        # which the graph keeps anyway, while the rows are a copy (the reverse copies again)
+        ctx.save_for_backward(F.detach(), flat, out[:, law.outputs :], *parameters)
         return out[:, : law.outputs].reshape(F.shape)
 
     @staticmethod
     def backward(ctx, grad):
-        rows, flat, saved, *parameters = ctx.saved_tensors
+        F, flat, saved, *parameters = ctx.saved_tensors
         law: CompiledLaw = ctx.law
+        rows = _rows(F, law)
         grad_rows, grad_flat = law.backward(rows, flat, saved,
                                             grad.reshape(rows.shape[0], -1))  # fmt: skip
         pieces = split_parameters(grad_flat, parameters)
