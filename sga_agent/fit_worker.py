@@ -16,7 +16,9 @@ and compiling. A warm-up that returns an iterator comes in stages, the ones ever
 needs first: a stage starts only while no request waits, so a waiting candidate goes before
 the remaining stages, which run whenever the worker next waits for a request, and those not
 reached when the input ends are skipped. STAGES, if given, is the most stages it runs ahead
-of requests (a worker for a single candidate needs the first only).
+of requests (a worker for a single candidate needs the first only). The request
+``{"warm": true}`` runs every stage left and answers ``{"warm": true}``: a slot sends it to the
+replacement it starts for a worker it recycles, and hands it candidates once it has answered.
 
 Its writable private memory is limited (``RLIMIT_DATA``, MEMORY_MB MiB; see :mod:`.sandbox`). A
 failure to allocate becomes an ``out_of_memory`` Evaluation, after which the worker exits so
@@ -65,6 +67,11 @@ def main(argv: list[str] | None = None) -> int:
             stages = itertools.islice(stages, int(args[3]))
     while line := next_request(sys.stdin, stages):
         request = json.loads(line)
+        if request.get("warm"):
+            while stages is not None:
+                stages = _advance(stages)
+            answer(answers, {"warm": True})
+            continue
         evaluation = failure or score(task, request["data"], request["settings"])
         answer(answers, evaluation.to_dict())
         if evaluation.status == "out_of_memory":
@@ -89,14 +96,20 @@ def next_request(requests: IO[str], stages: Iterator[None] | None) -> str:
     """The next request line ("" once the input ends), running warm-up ``stages`` while none
     waits."""
     while stages is not None and not _waiting(requests):
-        try:
-            next(stages)
-        except StopIteration:
-            stages = None
-        except Exception as error:
-            _warm_up_failed(error)
-            stages = None
+        stages = _advance(stages)
     return requests.readline()
+
+
+def _advance(stages: Iterator[None]) -> Iterator[None] | None:
+    """Run the next warm-up stage; the stages left (None once none is, or one failed)."""
+    try:
+        next(stages)
+    except StopIteration:
+        return None
+    except Exception as error:
+        _warm_up_failed(error)
+        return None
+    return stages
 
 
 def _waiting(requests: IO[str]) -> bool:

@@ -14,7 +14,11 @@ score is computed. Each evaluation has two steps, each in its own process:
    never imports or runs candidate code; the task checks the data before using it.
 
 Whatever goes wrong comes back as an invalid ``Evaluation`` with a ``status`` and a one-line
-``reason``, never as an exception in the caller:
+``reason``, never as an exception in the caller. A helper that fails in a way the candidate may
+not have caused (killed from outside, out of memory in a worker that had evaluated before)
+first gets the candidate's step tried once more on a fresh helper (``extras["retried"]`` says
+why; see :class:`EvaluationSlot`); a warm fit worker is replaced by a fresh one, warmed up
+beforehand, once it has grown (:class:`Recycling`).
 
 =================  ============================================================================
 status             cause
@@ -163,7 +167,15 @@ class SandboxLimits:
 
 
 class HelperFailure(RuntimeError):
-    """A capture server or fit worker did not start, died or stopped answering."""
+    """A capture server or fit worker did not start, died or stopped answering.
+
+    ``returncode`` is the helper's exit status when it ended by itself (negative: killed by
+    that signal), None when it was killed for not answering in time or answering garbage.
+    """
+
+    def __init__(self, message: str, returncode: int | None = None) -> None:
+        super().__init__(message)
+        self.returncode = returncode
 
 
 #: Every helper process started and not yet reaped, so that an interrupted caller can kill
@@ -219,31 +231,72 @@ class _LineProcess:
                 raise ValueError("not a JSON object")
             return answer
         except (OSError, ValueError, HelperFailure) as error:
-            self.kill()
-            raise HelperFailure(str(error) or type(error).__name__) from None
+            raise self._failed(error) from None
+
+    def send(self, message: dict[str, Any]) -> None:
+        """Send ``message`` without waiting for its answer (read it with :meth:`poll` or
+        :meth:`ask`); a process that has gone shows when its answer is read."""
+        assert self.process.stdin is not None
+        with contextlib.suppress(OSError):
+            self.process.stdin.write((json.dumps(message) + "\n").encode())
+            self.process.stdin.flush()
+
+    def poll(self) -> dict[str, Any] | None:
+        """The next answer if it has come, else None, without waiting; raises
+        :class:`HelperFailure` (after killing the process) as :meth:`ask` does."""
+        try:
+            if not self._fill(0.0):
+                return None
+        except (OSError, HelperFailure) as error:
+            raise self._failed(error) from None
+        return self.ask(None, 0.0)
+
+    def _failed(self, error: Exception) -> HelperFailure:
+        """Kill the process; the failure, with its exit status if it had ended by itself."""
+        message = str(error) or type(error).__name__
+        code = self.process.poll()
+        if code is None and isinstance(error, BrokenPipeError):  # it is exiting: its status
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                code = self.process.wait(1.0)
+        if code is not None and not isinstance(error, HelperFailure):
+            message = _ended(code)
+        self.kill()
+        return HelperFailure(message, code)
 
     def _read_line(self, deadline: float) -> bytes:
-        assert self.process.stdout is not None
-        fd = self.process.stdout.fileno()
-        while b"\n" not in self._pending:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
+        while not self._fill(deadline - time.monotonic()):
+            if deadline - time.monotonic() <= 0:
                 raise HelperFailure("timeout")
-            ready, _, _ = select.select([fd], [], [], remaining)
-            if ready:
-                chunk = os.read(fd, _READ_CHUNK)
-                if not chunk:
-                    raise HelperFailure(self._ended())
-                self._pending += chunk
         line, _, rest = bytes(self._pending).partition(b"\n")
         self._pending = bytearray(rest)
         return line
 
-    def _ended(self) -> str:
-        code = self.process.wait()
-        if code < 0:
-            return f"killed by {_signal_name(-code)}"
-        return f"exited with status {code}"
+    def _fill(self, wait_s: float) -> bool:
+        """Read what the process sent, waiting at most ``wait_s`` for it; whether a whole line
+        is there. :class:`HelperFailure` once its output has ended."""
+        assert self.process.stdout is not None
+        fd = self.process.stdout.fileno()
+        while b"\n" not in self._pending:
+            ready, _, _ = select.select([fd], [], [], max(wait_s, 0.0))
+            if not ready:
+                return False
+            chunk = os.read(fd, _READ_CHUNK)
+            if not chunk:
+                raise HelperFailure(_ended(self.process.wait()), self.process.returncode)
+            self._pending += chunk
+            wait_s = 0.0  # what is there already, no more waiting
+        return True
+
+    def rss_mb(self) -> float | None:
+        """Its resident memory in MB (``VmRSS`` of /proc), None where it cannot be read."""
+        try:
+            with open(f"/proc/{self.process.pid}/status") as status:
+                for line in status:
+                    if line.startswith("VmRSS:"):
+                        return int(line.split()[1]) / 1024
+        except (OSError, ValueError, IndexError):
+            pass
+        return None
 
     @property
     def alive(self) -> bool:
@@ -282,6 +335,81 @@ class _LineProcess:
                     stream.close()
 
 
+#: Signals that reach a process from outside (an operator, the OOM killer, a supervisor), as
+#: opposed to a fault of the code it runs (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) or a
+#: resource limit it exceeded (SIGXCPU, SIGXFSZ).
+OUTSIDE_SIGNALS = frozenset(
+    {signal.SIGKILL, signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT}
+)
+#: Evaluations a warm fit worker runs before a fresh one replaces it, a backstop (see
+#: :class:`Recycling`).
+FIT_RECYCLE_EVALUATIONS = 500
+#: Growth of a fit worker's resident memory past its reference that gets it replaced.
+FIT_RECYCLE_GROWTH = 1.15
+#: Evaluations of a fit worker after which its resident memory is its reference.
+FIT_RECYCLE_REFERENCE = 25
+
+
+@dataclass(frozen=True)
+class Recycling:
+    """When a slot replaces its warm fit worker by a fresh process (see :class:`EvaluationSlot`).
+
+    Measured with ``benchmarks/soak.py`` (elastic, 100 steps, one epoch, the GP's laws, two
+    workers, 450 evaluations, on two busy cores): a fit worker's resident memory rises steeply
+    over its first ~25 evaluations (to ~530 MB: first uses of torch and Taichi), then by
+    ~0.5 MB per evaluation without end (~600 MB after 150 evaluations of the worker; its
+    ``VmData``, which ``RLIMIT_DATA`` limits, grows alike). Each compiled law leaves Taichi
+    kernels that Taichi 1.7 cannot free (~0.9 MB, see :class:`bridges.scalar_law.CompiledLaw`),
+    so the growth follows the laws a worker compiles, not its evaluations: a count would
+    replace workers needlessly where laws run in torch, and too late where they are large. So
+    memory decides: a worker is replaced once its RSS exceeds 1.15 times what it had after its
+    25th evaluation. In that soak each slot's worker was replaced once, after ~180 evaluations
+    at ~610 MB; the slot's fit memory peaked at 1.15-1.16x its value after the run's first
+    50 evaluations and ended at 0.98-1.0x; the evaluations per minute did not fall (46 for
+    the first hundred, 51 for the last); the capture servers stayed at 340 MB. A count (500) stays as a
+    backstop for growth RSS would not show. A replacement costs a start and a warm-up of the
+    task (seconds of one core), spent beside the slot's evaluations.
+
+    Parameters
+    ----------
+    evaluations : int or None
+        Evaluations a fit worker runs before it is replaced (None: no count).
+    growth : float or None
+        Replace a fit worker whose resident memory exceeds ``growth`` times its reference (None:
+        its memory is not watched).
+    reference : int
+        Evaluations after which a fit worker's resident memory is its reference: by then it
+        has loaded and compiled what every evaluation needs.
+    """
+
+    evaluations: int | None = FIT_RECYCLE_EVALUATIONS
+    growth: float | None = FIT_RECYCLE_GROWTH
+    reference: int = FIT_RECYCLE_REFERENCE
+
+    def __post_init__(self) -> None:
+        if self.evaluations is not None and self.evaluations < 1:
+            raise ValueError(f"evaluations must be at least 1 or None, got {self.evaluations}")
+        if self.growth is not None and not self.growth > 1:
+            raise ValueError(f"growth must be above 1 or None, got {self.growth}")
+        if self.reference < 1:
+            raise ValueError(f"reference must be at least 1, got {self.reference}")
+
+
+@dataclass
+class _Blameless:
+    """A helper's failure the candidate may not have caused: ``evaluation`` is its verdict
+    unless its step, tried again on a fresh helper, ends otherwise; ``why`` is said in
+    ``extras["retried"]``."""
+
+    evaluation: Evaluation
+    why: str
+
+
+def _verdict(outcome: Any) -> Any:
+    """``outcome``, with a :class:`_Blameless` failure that is not tried again as its verdict."""
+    return outcome.evaluation if isinstance(outcome, _Blameless) else outcome
+
+
 class EvaluationSlot:
     """One pool slot: a capture server and a trusted fit worker, started when first needed.
 
@@ -289,10 +417,38 @@ class EvaluationSlot:
     as the task and the settings' ``options`` are the same (a task may set up its process from
     them, e.g. the floating-point precision). Helpers that fail are started afresh.
 
+    Warm fit workers are recycled (``recycling``, see :class:`Recycling`): once one is due, a
+    fresh one starts and warms up in the background while the old one goes on evaluating; the
+    first fit after the fresh one has finished its warm-up goes to it, and the old one exits
+    normally. No candidate waits for the replacement.
+
+    Blame only the candidate: a step whose helper fails in a way the candidate cannot have
+    caused, or may not have, is tried once more on a fresh helper (the capture again, or the
+    fit again with the same captured data), and ``extras["retried"]`` says why; what the retry
+    ends with is the verdict. Each step is tried at most twice, so a candidate is never
+    evaluated without end, and it gets one evaluation. Retried:
+
+    * the fit worker died (any signal or exit status, while it starts or fits): it never runs
+      candidate code, so a SIGKILL or SIGTERM came from outside (an operator, the OOM killer),
+      and a death its data causes repeats on the fresh worker;
+    * the fit ran out of memory in a worker that had evaluated earlier candidates, whose
+      leftovers may be the cause (out of memory on a fresh worker is the verdict);
+    * the capture server died, or was killed by a signal while it started: the server never
+      runs candidate code and, isolated, the candidate cannot signal it (ambiguous without
+      isolation: the retry decides);
+    * the confined capture process was killed by a signal from outside (:data:`OUTSIDE_SIGNALS`:
+      SIGKILL, SIGTERM, ...): an operator or the OOM killer, or the candidate (it may signal
+      itself, or exceed the hard CPU limit, which is SIGKILL): ambiguous.
+
+    Never retried, the candidate's own doing: the capture process faulted (SIGSEGV, SIGBUS,
+    SIGABRT, ...), exceeded a limit (SIGXCPU, SIGXFSZ, a failed allocation: out of memory),
+    exited without a result (``os._exit``), raised, or was refused; timeouts (a retry would
+    double the wait); and a helper that answered garbage (killed by the slot).
+
     A ``one_shot`` slot evaluates one candidate: its fit worker warms up only the first stage
     of the task's warm-up (what every evaluation needs; see :mod:`.fit_worker`), and each
     helper's input is closed once its request is sent, so that both exit as soon as they have
-    answered.
+    answered. It recycles nothing.
     """
 
     def __init__(
@@ -300,15 +456,23 @@ class EvaluationSlot:
         limits: SandboxLimits,
         extra_python_path: Sequence[str | os.PathLike[str]] = (),
         one_shot: bool = False,
+        recycling: Recycling = Recycling(),  # noqa: B008 (frozen)
     ) -> None:
         self.limits = limits
         self.extra_python_path = tuple(extra_python_path)
         self.one_shot = one_shot
+        self.recycling = recycling
         self._folder = Path(tempfile.mkdtemp(prefix="sga-sandbox-"))
         self._capture: tuple[str, _LineProcess] | None = None
         self._capture_ready = False
         self._fit: tuple[str, _LineProcess] | None = None
-        self._fit_ready = False
+        self._fit_awaiting = 0  # answers (ready, end of warm-up) before its first request
+        self._fit_evaluations = 0  # by the current fit worker
+        self._fit_reference: float | None = None  # its RSS after recycling.reference of them
+        self._spare: tuple[str, _LineProcess] | None = None  # its replacement, warming up
+        self._spare_awaiting = 0
+        self._retired: list[tuple[float, _LineProcess]] = []  # exiting, since when
+        self._fit_workers_started = 0
         self._stopped = False
 
     def evaluate(
@@ -322,23 +486,38 @@ class EvaluationSlot:
 
         A fit worker that is not running yet is started first, so that it loads while the
         capture runs. ``on_captured(task, options)`` (the options as JSON) is called once the
-        capture step has ended.
+        capture step has ended. A step tried again (see the class docstring) has the time it
+        had the first time.
         """
         start = time.monotonic()
         request = _settings_json(settings)
         options = json.dumps(request["options"], sort_keys=True)
         self._start_fit_worker(task, options)
+        retried: list[str] = []
+        attempt = start
         captured = self._captured(task, solution)
-        capture_seconds = time.monotonic() - start
+        if isinstance(captured, _Blameless) and not self._stopped:
+            retried.append(captured.why)
+            attempt = time.monotonic()
+            captured = self._captured(task, solution)
+        captured = _verdict(captured)
+        captured_at = time.monotonic()
         if on_captured is not None:
             on_captured(task, options)
         if isinstance(captured, Evaluation):
             evaluation = captured
         else:
-            remaining = self.limits.timeout_s - capture_seconds
-            evaluation = self._fitted(captured, request, remaining)
+            remaining = self.limits.timeout_s - (captured_at - attempt)
+            fitted = self._fitted(captured, request, remaining)
+            if isinstance(fitted, _Blameless) and not self._stopped:
+                retried.append(fitted.why)
+                self._start_fit_worker(task, options)
+                fitted = self._fitted(captured, request, remaining)
+            evaluation = _verdict(fitted)
         evaluation.seconds = time.monotonic() - start
-        evaluation.extras.setdefault("capture_seconds", round(capture_seconds, 3))
+        evaluation.extras.setdefault("capture_seconds", round(captured_at - start, 3))
+        if retried:
+            evaluation.extras["retried"] = "; ".join(retried)
         return evaluation
 
     def start_helpers(self, task: str, options: str) -> None:
@@ -348,22 +527,28 @@ class EvaluationSlot:
         self._start_capture_server(task)
 
     def close(self) -> None:
-        """Stop the helper processes (letting them exit normally, all at once) and remove
-        their folder."""
+        """Stop the helper processes (letting them exit normally, all at once; a replacement
+        still warming up is killed) and remove their folder."""
         self.end_input()
         for helper in self._helpers():
             helper.close()
         self._capture = self._fit = None
+        self._retired = []
         shutil.rmtree(self._folder, ignore_errors=True)
 
     def end_input(self) -> None:
         """Close the helpers' input: they exit normally once done, without being waited for
-        (:meth:`close` waits)."""
+        (:meth:`close` waits). A replacement fit worker still warming up is killed: it would
+        finish its warm-up first, for nothing."""
+        if self._spare is not None:
+            self._spare[1].kill()
+            self._spare = None
         for helper in self._helpers():
             helper.end_input()
 
     def _helpers(self) -> list[_LineProcess]:
-        return [helper[1] for helper in (self._capture, self._fit) if helper is not None]
+        current = [helper[1] for helper in (self._capture, self._fit, self._spare) if helper]
+        return current + [helper for _, helper in self._retired]
 
     def kill(self) -> None:
         """Kill the helper processes now and start no new ones: an evaluation running in
@@ -374,11 +559,14 @@ class EvaluationSlot:
 
     # ------------------------------------------------------------------ capture
 
-    def _captured(self, task: str, solution: str) -> dict[str, Any] | Evaluation:
+    def _captured(self, task: str, solution: str) -> dict[str, Any] | Evaluation | _Blameless:
         try:
             server = self._capture_server(task)
         except HelperFailure as error:
-            return Evaluation.invalid(f"the capture server did not start: {error}", status="error")
+            failure = Evaluation.invalid(
+                f"the capture server did not start: {error}", status="error"
+            )
+            return _blameless_start(failure, "the capture server", error)
         timeout = min(self.limits.capture_timeout_s, self.limits.timeout_s)
         request = {
             "solution": solution,
@@ -392,8 +580,15 @@ class EvaluationSlot:
             self._capture = None
             if str(error) == "timeout":
                 return _failure(f"exceeded the time limit of {timeout:g} s", "timeout", "")
-            return _failure(f"the capture server failed: {error}", "crashed", server.log_tail())
-        return _capture_outcome(reply, self.limits, timeout)
+            failure = _failure(f"the capture server failed: {error}", "crashed", server.log_tail())
+            if error.returncode is None:  # killed here for answering garbage
+                return failure
+            return _Blameless(failure, _death("the capture server", error.returncode))
+        outcome = _capture_outcome(reply, self.limits, timeout)
+        number = int(reply.get("signal") or 0) if reply.get("status") == "crashed" else 0
+        if number in OUTSIDE_SIGNALS:
+            return _Blameless(outcome, _death("the capture process", -number))
+        return outcome
 
     def _capture_server(self, task: str) -> _LineProcess:
         """The capture server for ``task``, started unless it runs, once it has said it is
@@ -407,7 +602,8 @@ class EvaluationSlot:
                 ready = server.ask(None, START_TIMEOUT_S)
             except HelperFailure as error:
                 self._capture = None
-                raise HelperFailure(_last_line(server.log_tail()) or str(error)) from None
+                message = _last_line(server.log_tail()) or str(error)
+                raise HelperFailure(message, error.returncode) from None
             if not ready.get("ready"):
                 self._capture = None
                 server.kill()
@@ -437,15 +633,18 @@ class EvaluationSlot:
 
     def _fitted(
         self, data: dict[str, Any], settings: dict[str, Any], remaining: float
-    ) -> Evaluation:
+    ) -> Evaluation | _Blameless:
         if remaining <= 0:
             return _failure(
                 f"exceeded the time limit of {self.limits.timeout_s:g} s", "timeout", ""
             )
+        self._take_warm_spare()
         try:
             worker = self._ready_fit_worker()
         except HelperFailure as error:
-            return Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
+            failure = Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
+            return _blameless_start(failure, "the fit worker", error)
+        earlier = self._fit_evaluations
         try:
             answer = worker.ask({"data": data, "settings": settings}, remaining,
                                 last=self.one_shot)  # fmt: skip
@@ -454,51 +653,147 @@ class EvaluationSlot:
             if str(error) == "timeout":
                 reason = f"exceeded the time limit of {self.limits.timeout_s:g} s"
                 return _failure(reason, "timeout", "")
-            return _failure(f"the fit worker failed: {error}", "crashed", worker.log_tail())
+            failure = _failure(f"the fit worker failed: {error}", "crashed", worker.log_tail())
+            if error.returncode is None:  # killed here for answering garbage
+                return failure
+            return _Blameless(failure, _death("the fit worker", error.returncode))
         try:
             evaluation = Evaluation.from_dict(answer)
         except (TypeError, ValueError) as error:
             return Evaluation.invalid(
                 f"unreadable answer of the fit worker: {error}", status="error"
             )
+        self._fit_evaluations += 1
         if not worker.alive or evaluation.status == "out_of_memory":
-            self._fit = None  # it exits after a failed allocation
+            self._retire_fit_worker()  # it exits after a failed allocation
+        else:
+            self._tend_fit_worker(worker)
         if evaluation.valid:  # checked by the fit: what was scored, for an honest re-evaluation
             evaluation.artifacts["captured"] = data
+        if evaluation.status == "out_of_memory" and earlier:
+            plural = "s" if earlier > 1 else ""
+            why = f"the fit worker ran out of memory after {earlier} earlier evaluation{plural}"
+            return _Blameless(evaluation, why)
         return evaluation
 
     def _start_fit_worker(self, task: str, options: str) -> None:
-        """Start a fit worker for ``task`` and its ``options`` (JSON) unless one runs; do not
-        wait (it warms up while the capture runs)."""
+        """Start a fit worker for ``task`` and its ``options`` (JSON) unless one runs (or its
+        replacement does); do not wait (it warms up while the capture runs)."""
         key = f"{task}\n{options}"
         if self._fit is not None and self._fit[0] == key and self._fit[1].alive:
             return
         if self._fit is not None:
             self._fit[1].close()
-        if self._stopped:
             self._fit = None
+        if self._spare is not None and (self._spare[0] != key or not self._spare[1].alive):
+            self._spare[1].kill()
+            self._spare = None
+        if self._stopped:
             return
+        if self._spare is not None:  # started already, perhaps warm
+            self._fit, self._fit_awaiting, self._spare = self._spare, self._spare_awaiting, None
+        else:
+            self._fit, self._fit_awaiting = (key, self._new_fit_worker(task, options)), 1
+        self._fit_evaluations, self._fit_reference = 0, None
+
+    def _new_fit_worker(self, task: str, options: str) -> _LineProcess:
         env = worker_environment(self.limits, self.extra_python_path)
         command = [sys.executable, "-m", "sga_agent.fit_worker", task,
                    str(self.limits.memory_mb), options]  # fmt: skip
         if self.one_shot:
             command.append("1")  # warm-up stages run ahead of the request
-        self._fit = (key, _LineProcess(command, env, self._folder, "fit"))
-        self._fit_ready = False
+        self._fit_workers_started += 1
+        number = self._fit_workers_started
+        return _LineProcess(command, env, self._folder, "fit" if number == 1 else f"fit-{number}")
 
     def _ready_fit_worker(self) -> _LineProcess:
-        """The started fit worker, once it has said it is ready."""
+        """The started fit worker, once it has said it is ready (and, a replacement, that it
+        has warmed up)."""
         if self._fit is None:
             raise HelperFailure("the pool was stopped")
         worker = self._fit[1]
-        if not self._fit_ready:
-            try:  # not ready: a task that cannot load, each answer says why
+        try:  # not ready: a task that cannot load, each answer says why
+            while self._fit_awaiting:
                 worker.ask(None, START_TIMEOUT_S)
-            except HelperFailure as error:
-                self._fit = None
-                raise HelperFailure(_last_line(worker.log_tail()) or str(error)) from None
-            self._fit_ready = True
+                self._fit_awaiting -= 1
+        except HelperFailure as error:
+            self._fit = None
+            message = _last_line(worker.log_tail()) or str(error)
+            raise HelperFailure(message, error.returncode) from None
         return worker
+
+    # ------------------------------------------------------------------ recycling
+
+    def _tend_fit_worker(self, worker: _LineProcess) -> None:
+        """After a fit: note the worker's memory, start its replacement once it is due."""
+        rss = worker.rss_mb()
+        if self._fit_evaluations == self.recycling.reference:
+            self._fit_reference = rss
+        self._reap_retired()
+        if self.one_shot or self._spare is not None or self._fit is None:
+            return
+        recycling, reference = self.recycling, self._fit_reference
+        worn = recycling.evaluations is not None and self._fit_evaluations >= recycling.evaluations
+        grown = (recycling.growth is not None and rss is not None and reference is not None
+                 and rss > recycling.growth * reference)  # fmt: skip
+        if worn or grown:
+            key = self._fit[0]
+            spare = self._new_fit_worker(*key.split("\n", 1))
+            spare.send({"warm": True})  # it answers once its whole warm-up has run
+            self._spare, self._spare_awaiting = (key, spare), 2
+
+    def _take_warm_spare(self) -> None:
+        """Put the replacement in the current worker's place if it has warmed up (the old one
+        exits); one that failed to start is dropped (the next fit starts another)."""
+        if self._spare is None:
+            return
+        key, spare = self._spare
+        try:
+            while self._spare_awaiting and (answer := spare.poll()) is not None:
+                if self._spare_awaiting == 2 and not answer.get("ready"):
+                    raise HelperFailure("not ready")
+                self._spare_awaiting -= 1
+        except HelperFailure:
+            spare.kill()
+            self._spare = None
+            return
+        if self._spare_awaiting:
+            return  # still warming up: the current worker goes on
+        self._retire_fit_worker()
+        self._fit, self._fit_awaiting, self._spare = (key, spare), 0, None
+        self._fit_evaluations, self._fit_reference = 0, None
+
+    def _retire_fit_worker(self) -> None:
+        """Let the current fit worker exit on its own (it is reaped later, or killed once
+        :data:`CLOSE_TIMEOUT_S` have passed)."""
+        if self._fit is not None:
+            self._fit[1].end_input()
+            self._retired.append((time.monotonic(), self._fit[1]))
+            self._fit = None
+
+    def _reap_retired(self) -> None:
+        """Reap the retired workers that have exited; kill those that take too long."""
+        now, kept = time.monotonic(), []
+        for since, worker in self._retired:
+            if worker.alive and now - since < CLOSE_TIMEOUT_S:
+                kept.append((since, worker))
+            else:
+                worker.kill()
+        self._retired = kept
+
+
+def _blameless_start(failure: Evaluation, helper: str, error: HelperFailure) -> Any:
+    """A helper that did not start: blameless if a signal killed it meanwhile (a task that
+    cannot load exits with a status, which is the verdict)."""
+    if error.returncode is not None and error.returncode < 0:
+        return _Blameless(failure, f"{_death(helper, error.returncode)} while starting")
+    return failure
+
+
+def _death(helper: str, code: int) -> str:
+    """How a helper ended, as a clause: "the fit worker was killed by SIGKILL"."""
+    ended = _ended(code)
+    return f"{helper} was {ended}" if code < 0 else f"{helper} {ended}"
 
 
 def _capture_outcome(
@@ -573,6 +868,13 @@ def _failure(reason: str, status: str, log: str) -> Evaluation:
 def _last_line(log: str) -> str:
     lines = [line.strip() for line in log.splitlines() if line.strip()]
     return lines[-1] if lines else ""
+
+
+def _ended(code: int) -> str:
+    """How a process with exit status ``code`` ended ("killed by SIGKILL")."""
+    if code < 0:
+        return f"killed by {_signal_name(-code)}"
+    return f"exited with status {code}"
 
 
 def _signal_name(number: int) -> str:
@@ -654,6 +956,8 @@ class SandboxPool:
         Limits of every evaluation.
     extra_python_path : sequence of path-like
         As for :func:`evaluate_in_sandbox`.
+    recycling : Recycling
+        When each slot replaces its warm fit worker.
     """
 
     def __init__(
@@ -662,6 +966,7 @@ class SandboxPool:
         limits: SandboxLimits = SandboxLimits(),  # noqa: B008 (frozen)
         *,
         extra_python_path: Sequence[str | os.PathLike[str]] = (),
+        recycling: Recycling = Recycling(),  # noqa: B008 (frozen)
     ) -> None:
         if max_workers is None:
             max_workers = os.cpu_count() or 1
@@ -673,7 +978,8 @@ class SandboxPool:
         self._executor = ThreadPoolExecutor(max_workers, thread_name_prefix="sga-sandbox")
         self._slots: queue.SimpleQueue[EvaluationSlot] = queue.SimpleQueue()
         self._evaluators = [
-            EvaluationSlot(limits, self.extra_python_path) for _ in range(max_workers)
+            EvaluationSlot(limits, self.extra_python_path, recycling=recycling)
+            for _ in range(max_workers)
         ]
         for evaluator in self._evaluators:
             self._slots.put(evaluator)

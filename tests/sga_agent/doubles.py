@@ -9,6 +9,7 @@ sandbox did.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
@@ -131,3 +132,55 @@ def not_a_task() -> object:
 def broken_task() -> ExecTask:
     """A factory that fails, as a plugin with a bug would."""
     raise RuntimeError("this plugin is broken")
+
+
+class HealthTask(ExecTask):
+    """:class:`ExecTask` for the slot's recycling and blame tests. Its fit warms up in three
+    stages and reports its process id, the stages it had run and the evaluations it ran before
+    (``fit_pid``, ``warm_stages``, ``earlier``). The candidate's ``report`` says what the fit
+    does besides: ``{"leak_mb": n}`` keeps n MB resident for good; ``{"oom": "always"}``
+    raises MemoryError, ``{"oom": "grown"}`` only in a worker that has evaluated before;
+    ``{"wait": PATH}`` writes ``PATH.fitting-PID`` and waits (at most a minute) for PATH to
+    exist; ``{"sleep": s}`` sleeps s seconds (in the fit; the capture sleeps
+    ``capture_sleep``), with ``{"marks": DIR}`` in a file ``DIR/fitting-PID`` meanwhile."""
+
+    warm_stages = 0
+    earlier = 0
+    kept: list[bytes] = []
+
+    def capture(self, solution: str) -> dict[str, Any]:
+        data = super().capture(solution)
+        report = data["report"] if isinstance(data["report"], dict) else {}
+        time.sleep(float(report.get("capture_sleep", 0)))
+        return data
+
+    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+        for _ in range(3):
+            time.sleep(0.05)
+            HealthTask.warm_stages += 1
+            yield
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        report = data["report"] if isinstance(data["report"], dict) else {}
+        earlier, HealthTask.earlier = HealthTask.earlier, HealthTask.earlier + 1
+        if report.get("oom") == "always" or (report.get("oom") == "grown" and earlier):
+            raise MemoryError("the double was asked to run out of memory")
+        HealthTask.kept.append(b"x" * (int(report.get("leak_mb", 0)) * 2**20))
+        if "wait" in report:
+            waiting = Path(f"{report['wait']}.fitting-{os.getpid()}")
+            waiting.write_text("")
+            deadline = time.monotonic() + 60
+            while not os.path.exists(report["wait"]) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            waiting.unlink()
+        marks = Path(report.get("marks", "")) / f"fitting-{os.getpid()}"
+        if "marks" in report:
+            marks.write_text("")
+        time.sleep(float(report.get("sleep", 0)))
+        if "marks" in report:
+            marks.unlink(missing_ok=True)
+        evaluation = super().evaluate(data, settings)
+        del evaluation.extras["environ"]
+        evaluation.extras.update(fit_pid=os.getpid(), warm_stages=HealthTask.warm_stages,
+                                 earlier=earlier)  # fmt: skip
+        return evaluation
