@@ -9,7 +9,8 @@ Layout of ``runs/<id>/``::
                            feedback.txt, curves.json, artifacts.json (what the trusted fit
                            left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
-    summary.json           written when the run ends
+    summary.json           written when the run ends (the search's totals), completed by
+                           the runner with what the run found (``findings``)
     run.lock               locked (``fcntl.flock``) by the one process that writes the run,
                            for its lifetime; it holds that process's id
 
@@ -39,6 +40,8 @@ from sga_agent.config import SearchConfig
 from sga_agent.task import Evaluation
 
 CONFIG, EVENTS, SUMMARY, LOCK = "config.json", "events.jsonl", "summary.json", "run.lock"
+#: The id of the task's seed solution, the first candidate of every run.
+SEED = "00-seed"
 #: A candidate's artifacts (what the trusted fit left for reports), beside its evaluation.
 ARTIFACTS = "artifacts.json"
 
@@ -252,3 +255,8 @@ class RunStore:
 
     def save_summary(self, summary: dict[str, Any]) -> None:
         _dump(self.path / SUMMARY, summary)
+
+    def summary(self) -> dict[str, Any]:
+        """What :meth:`save_summary` last wrote (empty before the run's end)."""
+        path = self.path / SUMMARY
+        return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}

@@ -5,8 +5,10 @@ Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python)
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -126,4 +128,19 @@ def run(
     with make_pool(config) as pool:
         store.append(pool_record(pool))
         search = Search(config, task, proposer, pool, store, on_event)
-        return search.run()
+        result = search.run()
+    record_findings(store, task)
+    return result
+
+
+def record_findings(store: RunStore, task: Task) -> None:
+    """Complete the run's ``summary.json`` with what it found (:mod:`sga_agent.report.findings`):
+    the best loss against the seed's and the true law's, the best solution with its fitted
+    constants, the task's assessment (its free run, for instance). Read back from the run
+    folder, as the report does; the search core knows nothing of it."""
+    from sga_agent.report.data import read_run
+    from sga_agent.report.findings import find
+
+    with contextlib.redirect_stdout(sys.stderr):  # stdout may carry --json (Taichi prints)
+        findings = find(read_run(store.path), task).to_dict()
+    store.save_summary({**store.summary(), "findings": findings})

@@ -10,9 +10,7 @@ asking the model again or re-evaluating what was finished.
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import sys
 from collections.abc import Callable
 from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
@@ -25,10 +23,10 @@ from sga_agent.heap import Entry, SolutionHeap
 from sga_agent.parsing import CodeRejected, check_candidate, parse_response
 from sga_agent.prompting import Shown, build_messages
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
-from sga_agent.run_store import RunStore
+from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import Evaluation, EvaluationSettings, Parent, Task
 
-SEED = "00-seed"
+__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals"]
 
 
 class Evaluator(Protocol):
@@ -313,15 +311,4 @@ class Search:
             "evaluations": result.totals.evaluations,
             "valid": result.totals.valid,
             "invalid": result.totals.invalid,
-            "findings": self._findings(),
         }
-
-    def _findings(self) -> dict[str, Any]:
-        """What the run found (:mod:`sga_agent.report.findings`): the best loss against the
-        seed's and the true law's, the best solution with its fitted constants, the task's
-        assessment with the free run. Read back from the run folder, as the report does."""
-        from sga_agent.report.data import read_run
-        from sga_agent.report.findings import find
-
-        with contextlib.redirect_stdout(sys.stderr):  # stdout may carry --json (Taichi prints)
-            return find(read_run(self.store.path), self.task).to_dict()

@@ -14,7 +14,7 @@ from typing import Any
 
 from sga_agent.fingerprint import fingerprint
 from sga_agent.report.data import Candidate, Run
-from sga_agent.search import SEED
+from sga_agent.run_store import SEED
 from sga_agent.task import Assessment, solution_with_parameters
 
 TOP = 3
