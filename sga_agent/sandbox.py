@@ -366,9 +366,9 @@ class Recycling:
     25th evaluation. In that soak each slot's worker was replaced once, after ~180 evaluations
     at ~610 MB; the slot's fit memory peaked at 1.15-1.16x its value after the run's first
     50 evaluations and ended at 0.98-1.0x; the evaluations per minute did not fall (46 for
-    the first hundred, 51 for the last); the capture servers stayed at 340 MB. A count (500) stays as a
-    backstop for growth RSS would not show. A replacement costs a start and a warm-up of the
-    task (seconds of one core), spent beside the slot's evaluations.
+    the first hundred, 51 for the last); the capture servers stayed at 340 MB. A count (500)
+    stays as a backstop for growth RSS would not show. A replacement costs a start and a
+    warm-up of the task (seconds of one core), spent beside the slot's evaluations.
 
     Parameters
     ----------
