@@ -143,6 +143,7 @@ class RayPool:
         self._free: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._slots: list[Any] = []  # every actor started, live or starting
         self._starting = 0  # replacements not ready yet
+        self._replacements: set[Any] = set()  # their actors, placed or waiting for a node
         self._warm: set[tuple[str, str]] = set()  # (task, options) the slots were warmed for
         self._closed = False
         for _ in range(self._slot_count()):
@@ -240,8 +241,9 @@ class RayPool:
                 self._free.put(actor)
                 return _lost(self._ray, error)
             self._free.put(actor)
-            if retried:
-                evaluation.extras["retried"] = retried
+            if retried:  # after any retry of the slot's own (a helper that died on the node)
+                earlier = evaluation.extras.get("retried")
+                evaluation.extras["retried"] = f"{retried}; then {earlier}" if earlier else retried
             return evaluation
         raise AssertionError("unreachable")
 
@@ -268,15 +270,22 @@ class RayPool:
         threading.Thread(target=self._start_replacement, args=(warm,), daemon=True).start()
 
     def _start_replacement(self, warm: set[tuple[str, str]]) -> None:
-        actor = self._actor_class.remote(self.limits, self.extra_python_path)
+        with self._lock:
+            if self._closed:
+                self._starting -= 1
+                return
+            actor = self._actor_class.remote(self.limits, self.extra_python_path)
+            self._replacements.add(actor)
         try:
             ready, _ = self._ray.wait([actor.node.remote()], timeout=REPLACEMENT_TIMEOUT_S)
         except Exception:  # the cluster went away meanwhile
             ready = []
         with self._lock:
             self._starting -= 1
+            self._replacements.discard(actor)
             if not ready or self._closed:
-                self._ray.kill(actor)
+                with contextlib.suppress(Exception):  # Ray may be shut down already
+                    self._ray.kill(actor)
                 return
             self._slots.append(actor)
         for task, options in warm:
@@ -302,6 +311,10 @@ class RayPool:
             with self._lock:
                 self._closed = True
                 slots, self._slots = list(self._slots), []
+                waiting = list(self._replacements)
+            for actor in waiting:  # never placed (no room left) or not ready yet
+                with contextlib.suppress(Exception):
+                    self._ray.kill(actor)
             if wait_for_pending:
                 closing = [actor.close.remote() for actor in slots]
                 with contextlib.suppress(Exception):

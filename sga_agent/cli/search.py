@@ -19,7 +19,7 @@ from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
 from sga_agent.proposers.base import ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
-from sga_agent.run_store import RunStore, RunStoreError
+from sga_agent.run_store import RunFolderFull, RunStore, RunStoreError
 from sga_agent.task import configured
 
 
@@ -221,6 +221,8 @@ def execute(
         raise click.ClickException(f"{error}\n{resume}") from error
     except ProposerError as error:  # no model: stop
         raise click.ClickException(f"{error}\n{resume}") from error
+    except RunFolderFull as error:  # the disk is full: the message says what to do
+        raise click.ClickException(str(error)) from error
     except KeyboardInterrupt:
         finished = len(store.recorded().evaluations)
         click.echo(f"interrupted: {finished} finished evaluations are recorded; {resume}", err=True)
