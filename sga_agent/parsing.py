@@ -14,7 +14,8 @@ message is feedback for the next prompt, when it breaks a generic safety rule:
   named like a forbidden module (``torch.os``).
 
 The shape a solution must have (a ``Physics`` module, a molecule's literals, ...) is the task's
-business: a task may define ``check_solution(code)``, which raises :class:`CodeRejected` too.
+business: its ``check_solution(code)`` (see :class:`sga_agent.task.TaskBase`) raises
+:class:`CodeRejected` too.
 :func:`check_candidate` runs both, as the search and ``sga-agent evaluate`` do, and reports
 their problems together.
 
@@ -26,11 +27,11 @@ from __future__ import annotations
 
 import ast
 import re
-import warnings
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 
-from sga_agent.task import Task
+from sga_agent.task import Task, as_task
+from sga_agent.task.code import CodeRejected, Problem, dotted_name, import_aliases, parse_python
 
 #: Imports allowed by default, per task kind (top-level module names).
 DEFAULT_IMPORTS: dict[str, tuple[str, ...]] = {
@@ -69,13 +70,7 @@ _ALLOWED_DUNDERS = frozenset({"__init__"})
 _CODE_TAGS = frozenset({"", "python", "python3", "py"})
 _SECTIONS = {"analysis": "analysis", "step-by-step plan": "plan", "step by step plan": "plan",
              "plan": "plan", "code": "code"}  # fmt: skip
-#: ``NAME = "`` (or ``NAME: T = "``) at a line start: such a literal is read as a raw string when
-#: a backslash breaks the parse (a SMILES's ``C\N``).
-_LITERAL_ASSIGNMENT = re.compile(r"""^(\s*[A-Za-z_]\w*\s*(?::[^=\n]*)?=\s*)(["'])""", re.M)
 _HEADING = re.compile(r"^ {0,3}#{1,6}\s+(?:\d+[.)]\s*)?(.*?)[\s#]*$")  # "## 2. Plan" too
-_MAX_PROBLEMS = 5
-#: A problem of the code: ``(line, sentence)``, line 0 when no line applies.
-Problem = tuple[int, str]
 
 
 @dataclass(frozen=True)
@@ -93,20 +88,6 @@ class ParsedResponse:
 
     sections: dict[str, str]
     code: str | None
-
-
-class CodeRejected(ValueError):
-    """The code breaks a rule; the message says which and where, for the next prompt.
-
-    Raised with a message, or with ``(line, sentence)`` problems (kept in ``problems``), which
-    the message lists by line, up to five.
-    """
-
-    def __init__(self, problems: str | Sequence[Problem]) -> None:
-        self.problems: list[Problem] = (
-            [(0, problems)] if isinstance(problems, str) else list(problems)
-        )
-        super().__init__(_report(self.problems))
 
 
 def parse_response(text: str) -> ParsedResponse:
@@ -159,8 +140,7 @@ def _closes(line: str, ticks: int) -> bool:
 
 def check_candidate(code: str, task: Task) -> None:
     """Check a solution for ``task`` statically: the generic rules of :func:`check_code`, then
-    the task's own ``check_solution(code)`` if it has one (code that does not parse is not
-    shown to it).
+    the task's own ``check_solution(code)`` (code that does not parse is not shown to it).
 
     Raises
     ------
@@ -168,12 +148,10 @@ def check_candidate(code: str, task: Task) -> None:
         The problems of both checks together, listed by line.
     """
     problems = _problems(code, task.kind, None)
-    own = getattr(task, "check_solution", None)
-    if own is not None:
-        try:
-            own(code)
-        except CodeRejected as error:
-            problems += error.problems
+    try:
+        as_task(task).check_solution(code)
+    except CodeRejected as error:
+        problems += error.problems
     if problems:
         raise CodeRejected(problems)
 
@@ -213,43 +191,6 @@ def _problems(code: str, kind: str, allowed_imports: Collection[str] | None) -> 
     checker = _Checker(tree, allowed)
     checker.visit(tree)
     return checker.problems
-
-
-def parse_python(code: str) -> ast.Module:
-    """``ast.parse``, quietly (nothing is run).
-
-    A literal assigned at a line start whose backslash breaks the parse (a SMILES such as
-    ``"C/C=C\\N"``) is read as a raw string.
-
-    Raises
-    ------
-    CodeRejected
-        The code is not valid Python; the message names the line.
-    """
-    attempts = [code]
-    raw = _LITERAL_ASSIGNMENT.sub(r"\1r\2", code)
-    if raw != code:
-        attempts.append(raw)  # the literals read as raw strings
-    errors: list[SyntaxError] = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", (DeprecationWarning, SyntaxWarning))
-        for text in attempts:
-            try:
-                return ast.parse(text)
-            except SyntaxError as error:
-                errors.append(error)
-            except (RecursionError, MemoryError):
-                raise CodeRejected("the code is too deeply nested to be read") from None
-    where = f"line {errors[0].lineno}: " if errors[0].lineno else ""
-    raise CodeRejected(f"{where}the code is not valid Python ({errors[0].msg})")
-
-
-def _report(problems: list[Problem]) -> str:
-    unique = sorted(set(problems), key=lambda problem: (problem[0] == 0, problem))
-    lines = [f"line {line}: {text}" if line else text for line, text in unique[:_MAX_PROBLEMS]]
-    if len(unique) > _MAX_PROBLEMS:
-        lines.append(f"(and {len(unique) - _MAX_PROBLEMS} more problems)")
-    return "\n".join(lines)
 
 
 def _listing(names: Collection[str]) -> str:
@@ -391,23 +332,6 @@ def _source(node: ast.expr) -> str:
     return text if len(text) <= 60 or not isinstance(node, ast.Attribute) else "." + node.attr
 
 
-def import_aliases(tree: ast.Module) -> dict[str, str]:
-    """Names bound by imports, mapped to the dotted path they stand for."""
-    found = {}
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.asname:
-                    found[alias.asname] = alias.name
-                else:
-                    top = alias.name.split(".")[0]
-                    found[top] = top
-        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
-            for alias in node.names:
-                found[alias.asname or alias.name] = f"{node.module}.{alias.name}"
-    return found
-
-
 def _bound_names(tree: ast.Module) -> set[str]:
     """Every name the code binds: assignments, arguments, definitions, imports."""
     bound = set()
@@ -421,14 +345,3 @@ def _bound_names(tree: ast.Module) -> set[str]:
         elif isinstance(node, ast.alias):
             bound.add((node.asname or node.name).split(".")[0])
     return bound
-
-
-def dotted_name(node: ast.expr, aliases: dict[str, str]) -> str | None:
-    """``torch.nn.Module`` for an attribute chain rooted at an imported name, else None."""
-    parts = []
-    while isinstance(node, ast.Attribute):
-        parts.append(node.attr)
-        node = node.value
-    if isinstance(node, ast.Name) and node.id in aliases:
-        return ".".join([aliases[node.id], *reversed(parts)])
-    return None

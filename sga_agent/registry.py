@@ -17,7 +17,7 @@ import importlib
 import re
 from importlib.metadata import EntryPoint, entry_points
 
-from sga_agent.task import Task
+from sga_agent.task import Task, TaskBase, as_task
 
 GROUP = "sga_agent.tasks"
 
@@ -75,7 +75,7 @@ def _described_as(word: str, points: dict[str, EntryPoint]) -> list[str]:
     return found if len(found) == 1 else []
 
 
-def load_task(name: str) -> Task:
+def load_task(name: str) -> TaskBase:
     """Instantiate the task registered as ``name``.
 
     Raises
@@ -93,10 +93,10 @@ def load_task(name: str) -> Task:
             "does not satisfy sga_agent.task.Task (name, description, kind, seed_solution, "
             "prompt_parts, capture, evaluate)"
         )
-    return task
+    return as_task(task)
 
 
-def resolve_task(spec: str) -> Task:
+def resolve_task(spec: str) -> TaskBase:
     """A registered task, or the result of ``module:callable`` (a zero-argument factory).
 
     The second form is a plugin-development and testing aid: no entry point needed.
@@ -112,4 +112,4 @@ def resolve_task(spec: str) -> Task:
         raise TypeError(
             f"{spec} returned {type(task).__name__}, which does not satisfy sga_agent.task.Task"
         )
-    return task
+    return as_task(task)

@@ -23,7 +23,7 @@ from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool, threads_per_worker
 from sga_agent.search import Search, SearchResult
-from sga_agent.task import Task, configured
+from sga_agent.task import Task, as_task, configured
 
 REPLAY_PREFIX = "replay:"
 BUILTIN = "builtin"
@@ -48,10 +48,9 @@ def make_proposer(config: SearchConfig, task: Task) -> Proposer:
     if config.proposer.startswith(REPLAY_PREFIX):
         return ReplayProposer(Path(config.proposer[len(REPLAY_PREFIX) :]))
     if config.proposer == BUILTIN or config.proposer.startswith(BUILTIN + ":"):
-        factory = getattr(task, "builtin_proposer", None)
-        if factory is None:
+        builtin = as_task(task).builtin_proposer()
+        if builtin is None:
             raise ProposerChoiceError(f"task {task.name!r} has no built-in proposer; use --model")
-        builtin = factory()
         if config.proposer not in (BUILTIN, builtin.name):
             raise ProposerChoiceError(
                 f"task {task.name!r} offers {builtin.name!r}, not {config.proposer!r}"

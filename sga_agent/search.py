@@ -20,11 +20,11 @@ from sga_agent import events as ev
 from sga_agent.config import SearchConfig
 from sga_agent.fingerprint import fingerprint
 from sga_agent.heap import Entry, SolutionHeap
-from sga_agent.parsing import CodeRejected, check_candidate, parse_response
+from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.prompting import Shown, build_messages
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
 from sga_agent.run_store import SEED, RunStore
-from sga_agent.task import Evaluation, EvaluationSettings, Parent, Task
+from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task
 
 __all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals"]
 

@@ -15,8 +15,8 @@ import random
 from collections.abc import Sequence
 from typing import Any
 
-from sga_agent.parsing import CodeRejected
 from sga_agent.task import (
+    CodeRejected,
     Evaluation,
     EvaluationSettings,
     InvalidSolution,

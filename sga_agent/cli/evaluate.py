@@ -18,9 +18,9 @@ from rich.text import Text
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
-from sga_agent.parsing import CodeRejected, check_candidate
+from sga_agent.parsing import check_candidate
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox, threads_per_worker
-from sga_agent.task import Evaluation, EvaluationSettings, Task
+from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Task
 
 _FENCED_PYTHON = re.compile(r"```python[^\n]*\n(.*?)```", re.DOTALL)
 _DEFAULTS = SandboxLimits()

@@ -12,11 +12,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from sga_agent.registry import load_task
-from sga_agent.report import pictures, plots
+from sga_agent.report import plots
 from sga_agent.report.data import Run, read_run
 from sga_agent.report.findings import TOP, Findings, distinct, find
 from sga_agent.report.render import Code, Image, Section, Table, Text, write
-from sga_agent.task import STATUSES
+from sga_agent.task import STATUSES, ReportView, TaskBase
 
 
 def _loss(value: float | None) -> str:
@@ -45,34 +45,18 @@ def loss_line(findings: Findings) -> str:
     return line
 
 
-def free_run_line(findings: Findings, simulate: bool) -> str | None:
-    """The free-run error in body sizes (None for a task without a free run)."""
-    assessment = findings.assessment
-    run = assessment.free_run if assessment else None
-    if run is None:
-        if assessment is not None and assessment.truth and not simulate:
-            return "- free run: skipped (`--no-motion`)"
-        return None
-    if run.unstable:
-        return f"- free run of the best law: unstable ({run.unstable})"
-    return (
-        f"- free run of the best law (from the initial state, no teacher forcing, "
-        f"{run.steps} steps): RMS position error **{100 * run.final_error:.3g}%** of the body "
-        f"size at the end, {100 * run.mean_error:.3g}% on average (body size "
-        f"{run.body_size:.3g} m)"
-    )
-
-
-def summary_section(run: Run, findings: Findings, simulate: bool) -> Section:
-    """What a reader needs in ten seconds: the losses, the truth, the law, the free run."""
+def summary_section(
+    run: Run, findings: Findings, task: TaskBase | None, view: ReportView
+) -> Section:
+    """What a reader needs in ten seconds: the losses, the truth, the law, and what the task
+    adds (its free run, its table of the top molecules)."""
     assessment = findings.assessment
     lines = [f"- task: `{run.task}`"]
     if assessment is not None and assessment.truth:
         lines.append(f"- ground truth: {assessment.truth}")
     lines.append(loss_line(findings))
-    free = free_run_line(findings, simulate)
-    if free:
-        lines.append(free)
+    if task is not None:
+        lines += task.summary_lines(view)
     if findings.assessment_error:
         lines.append(f"- the task could not assess the best solution: {findings.assessment_error}")
     duration = f" in {findings.duration_s / 60:.1f} min" if findings.duration_s else ""
@@ -85,9 +69,9 @@ def summary_section(run: Run, findings: Findings, simulate: bool) -> Section:
     if run.summary and run.summary.get("stopped"):
         lines.append(f"- stopped: {run.summary['stopped']}")
     blocks: list = [Text("\n".join(lines))]
-    if findings.molecules:
-        blocks += [Text("Top molecules (distinct SMILES), property on the QM9 scale:"),
-                   molecules_table(findings)]  # fmt: skip
+    own = task.summary_blocks(view) if task is not None else []
+    if own:
+        blocks += own
     elif findings.best is not None and findings.best_code:
         fitted = bool(findings.best.parameters)
         blocks.append(Text("The best solution, its fitted constants written in:" if fitted
@@ -102,61 +86,11 @@ def summary_section(run: Run, findings: Findings, simulate: bool) -> Section:
     return Section("Summary", blocks)
 
 
-def molecules_table(findings: Findings) -> Table:
-    """Rank, SMILES, the normalized property and its value in Hartree and eV, the target, the
-    distance to it and the loss of each top molecule."""
-    rows = []
-    for rank, m in enumerate(findings.molecules, 1):
-        scale = "-" if m["hartree"] is None else f"{m['hartree']:+.4f} Ha ({m['ev']:+.2f} eV)"
-        rows.append([
-            str(rank), m["candidate"], m["smiles"], f"{m['normalized']:+.3f}", scale,
-            f"{m['target']:+g}", f"{m['distance']:.3g}", _loss(m["loss"]),
-        ])  # fmt: skip
-    name = findings.molecules[0]["property"]
-    header = ["rank", "candidate", "SMILES", f"{name}, normalized", f"{name}, QM9 scale",
-              "target", "distance", "loss"]  # fmt: skip
-    return Table(header, rows)
-
-
 def outcomes_table(run: Run) -> Table:
     counts = plots.outcome_counts(run)
     rows = [[str(i), *(str(counts[i][s]) for s in STATUSES), str(sum(counts[i].values()))]
             for i in counts]  # fmt: skip
     return Table(["iteration", *STATUSES, "total"], rows)
-
-
-def task_section(
-    run: Run, findings: Findings, folder: Path, motion: bool, say: Callable[[str], None]
-) -> Section | None:
-    """The task-specific pictures; None for a task without any. Failures become a note."""
-    family, best = pictures.task_family(run.task), findings.best
-    if family == "constitutive":
-        title = "Free run: the observation vs the best law"
-        if not motion:
-            return Section(title, [Text("Skipped (`--no-motion`).")])
-        free = findings.assessment.free_run if findings.assessment else None
-        if best is None or free is None or free.positions is None:
-            why = "no candidate was scored" if best is None else "no free run of the best law"
-            return Section(title, [Text(f"Skipped: {why}.")])
-        say("drawing the free run")
-        png, gif = pictures.plot_motion(run, best, free, folder)
-        return Section(title, [
-            Text(f"Particle positions (x-y projection) of the observation and of {best.id} with "
-                 "its fitted parameters, simulated from the initial state without teacher "
-                 "forcing (the fit restarts every segment from the observed state; this does "
-                 "not)."),
-            Image(png.name, "observation vs the best law, free run"),
-            Image(gif.name, "animation"),
-        ])  # fmt: skip
-    if family == "molecules":
-        title = f"Top {TOP} molecules"
-        say("drawing the top molecules")
-        try:
-            png = pictures.plot_molecules(distinct(run, None), folder / "molecules.png")
-        except Exception as error:  # a SMILES RDKit cannot read only loses this picture
-            return Section(title, [Text(f"Skipped: the depiction failed ({error!r}).")])
-        return Section(title, [Image(png.name, "top molecules")])
-    return None
 
 
 def records_sections(run: Run, findings: Findings) -> list[Section]:
@@ -181,7 +115,7 @@ def records_sections(run: Run, findings: Findings) -> list[Section]:
     return sections
 
 
-def load_or_none(name: str) -> object | None:
+def load_or_none(name: str) -> TaskBase | None:
     """The run's task, or None when it is not installed here (the report then goes without
     what only the task knows)."""
     try:
@@ -207,13 +141,12 @@ def build_report(
     folder = Path(out) if out is not None else run.path / "report"
     folder.mkdir(parents=True, exist_ok=True)
     task = load_or_none(run.task)
-    if getattr(task, "assess", None) is not None and run.best is not None:
-        say("assessing the best solution: the true law's loss (cached after the first time)"
-            + (" and the free run (the first run compiles Taichi's kernels: up to a minute)"
-               if motion else ""))  # fmt: skip
+    if task is not None and run.best is not None and task.describe_assessment(motion):
+        say(task.describe_assessment(motion))
     findings = find(run, task, simulate=motion)
-    label = pictures.loss_label(run.task)
+    label = task.loss_label if task is not None else "loss"
     top = distinct(run, task)
+    view = ReportView(run.task, findings.best, top, findings.assessment, folder, motion, say)
     say("plotting the losses")
     figures = [
         plots.plot_zigzag(run, folder / "zigzag.png", label),
@@ -222,9 +155,8 @@ def build_report(
         plots.plot_curves(top, folder / "curves.png", label),
         plots.plot_outcomes(run, folder / "outcomes.png"),
     ]
-    sections = [summary_section(run, findings, motion)]
-    extra = task_section(run, findings, folder, motion, say)
-    if extra is not None:
+    sections = [summary_section(run, findings, task, view)]
+    for extra in task.report_sections(view) if task is not None else []:
         sections.append(extra)
         figures += [folder / b.file for b in extra.blocks if isinstance(b, Image)]
     sections += [

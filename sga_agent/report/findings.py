@@ -2,8 +2,10 @@
 and ``sga-agent report --json``.
 
 The search-side facts (best and seed losses, the best solution with its fitted constants)
-come from the run folder; what only the task knows (the ground truth, the true law's loss,
-the free run) comes from its optional ``assess`` method (see :class:`sga_agent.task.Task`).
+come from the run folder; what only the task knows comes from its hooks (see
+:class:`sga_agent.task.TaskBase`): the ground truth, the true law's loss and the free run from
+``assess``, facts about the top distinct solutions (a molecule's property in eV) from
+``top_facts``.
 """
 
 from __future__ import annotations
@@ -15,10 +17,9 @@ from typing import Any
 from sga_agent.fingerprint import fingerprint
 from sga_agent.report.data import Candidate, Run
 from sga_agent.run_store import SEED
-from sga_agent.task import Assessment, solution_with_parameters
+from sga_agent.task import Assessment, Task, as_task, solution_with_parameters
 
 TOP = 3
-HARTREE_IN_EV = 27.211386245988
 
 
 @dataclass
@@ -30,7 +31,7 @@ class Findings:
     best_code: str = ""
     assessment: Assessment | None = None
     assessment_error: str = ""
-    molecules: list[dict[str, Any]] = field(default_factory=list)
+    top_facts: list[dict[str, Any]] = field(default_factory=list)
     duration_s: float | None = None
 
     @property
@@ -63,7 +64,7 @@ class Findings:
             "derived": assessment.get("derived", {}),
             "free_run": assessment.get("free_run"),
             "assessment_error": self.assessment_error or None,
-            "molecules": self.molecules,
+            "molecules": self.top_facts,  # the key summary.json has always had
             "duration_s": self.duration_s,
         }
 
@@ -81,7 +82,7 @@ def _brief(candidate: Candidate | None) -> dict[str, Any] | None:
     return {"candidate": candidate.id, "loss": loss, "status": candidate.status}
 
 
-def law_key(task: object | None, candidate: Candidate) -> str:
+def law_key(task: Task | None, candidate: Candidate) -> str:
     """What makes two candidates the same solution for "distinct": the SMILES of a molecule,
     else the fingerprint of the code with every fitted parameter's starting value set to 0
     (so that children that differ from their parent only in where its fit started count as
@@ -92,7 +93,7 @@ def law_key(task: object | None, candidate: Candidate) -> str:
     return fingerprint(solution_with_parameters(task, candidate.code, zeros))
 
 
-def distinct(run: Run, task: object | None, count: int = TOP) -> list[Candidate]:
+def distinct(run: Run, task: Task | None, count: int = TOP) -> list[Candidate]:
     """The best ``count`` scored candidates, one per distinct solution (:func:`law_key`)."""
     seen: set[str] = set()
     found = []
@@ -106,7 +107,7 @@ def distinct(run: Run, task: object | None, count: int = TOP) -> list[Candidate]
     return found
 
 
-def find(run: Run, task: object | None, simulate: bool = True) -> Findings:
+def find(run: Run, task: Task | None, simulate: bool = True) -> Findings:
     """The findings of ``run``; ``task`` (None when it cannot be loaded) adds what it knows,
     ``simulate`` allows its free run. A failing assessment is recorded, not raised."""
     best = run.best
@@ -118,45 +119,14 @@ def find(run: Run, task: object | None, simulate: bool = True) -> Findings:
         best_code=solution_with_parameters(task, best.code, best.parameters) if best else "",
         duration_s=max(times) - run.started if times and run.started is not None else None,
     )
-    assess = getattr(task, "assess", None)
-    if best is not None and assess is not None:
+    if task is None:
+        return findings
+    task = as_task(task)
+    if best is not None:
         options = dict(run.config.get("task_options") or {})
         try:
-            findings.assessment = assess(best.artifacts(), best.parameters, options, simulate)
+            findings.assessment = task.assess(best.artifacts(), best.parameters, options, simulate)
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"
-    findings.molecules = [m for m in map(molecule_facts, distinct(run, task)) if m]
+    findings.top_facts = task.top_facts(distinct(run, task))
     return findings
-
-
-def molecule_facts(candidate: Candidate) -> dict[str, Any]:
-    """A molecule's property on the QM9 scale and its distance to the target (empty for a
-    candidate that is no molecule)."""
-    extras, parameters = candidate.extras, candidate.parameters
-    if "smiles" not in extras or "property" not in parameters or "target" not in extras:
-        return {}
-    value, target = float(parameters["property"]), float(extras["target"])
-    hartree = _hartree(str(extras.get("property_name")), value)
-    return {
-        "candidate": candidate.id,
-        "smiles": extras["smiles"],
-        "property": extras.get("property_name", "property"),
-        "normalized": value,
-        "target": target,
-        "distance": abs(value - target),
-        "hartree": hartree,
-        "ev": None if hartree is None else hartree * HARTREE_IN_EV,
-        "loss": candidate.loss,
-    }
-
-
-def _hartree(label: str, normalized: float) -> float | None:
-    """The normalized value back in Hartree on the QM9 B3LYP scale (QM9 mean + value x std);
-    None for a property the molecule tasks do not name."""
-    from tasks.molecules.calibration import PROPERTY_LABELS, QM9_STATISTICS
-
-    key = {name: key for key, name in PROPERTY_LABELS.items()}.get(label)
-    if key is None:
-        return None
-    stats = QM9_STATISTICS[key]
-    return stats.mean + normalized * stats.std

@@ -14,10 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
 from sga_agent.report.data import Candidate, Run
-from sga_agent.task import STATUSES
+from sga_agent.task import DPI, FONT, STATUSES
 
-DPI = 150
-FONT = {"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11, "legend.fontsize": 9}
 #: One colour per outcome, failures in warm colours.
 STATUS_COLOURS = dict(zip(STATUSES, (
     "#2a9d8f", "#e9c46a", "#f4a261", "#e76f51", "#8d6e63", "#9c27b0", "#455a64",

@@ -3,40 +3,11 @@
 from __future__ import annotations
 
 import html
-from dataclasses import dataclass, field
 from pathlib import Path
 
+from sga_agent.task.report import Code, Image, Section, Table, Text
 
-@dataclass
-class Text:
-    text: str
-
-
-@dataclass
-class Table:
-    header: list[str]
-    rows: list[list[str]]
-
-
-@dataclass
-class Image:
-    file: str
-    alt: str
-
-
-@dataclass
-class Code:
-    text: str
-    language: str = ""
-
-
-@dataclass
-class Section:
-    """A titled part of the report; ``collapsed`` ones are folded away (``<details>``)."""
-
-    title: str
-    blocks: list[Text | Table | Image | Code] = field(default_factory=list)
-    collapsed: bool = False
+__all__ = ["Code", "Image", "Section", "Table", "Text", "markdown", "to_html", "write"]
 
 
 def _runs(text: str) -> list[tuple[bool, list[str]]]:

@@ -20,7 +20,7 @@ import taichi_mpm as tm
 from bridges import laws as torch_laws
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Assessment, FreeRun
+from sga_agent.task import Assessment
 from taichi_mpm.frames import evenly_spaced
 from tasks.constitutive.evaluation import (
     check_precision,
@@ -28,6 +28,7 @@ from tasks.constitutive.evaluation import (
     ground_truth,
     known_elastic_law,
 )
+from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.ground_truth import cache_dir, cache_key
 from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target, build_law
 from tasks.constitutive.options import ConstitutiveOptions

@@ -16,8 +16,7 @@ import warnings
 import torch
 from torch import nn
 
-from sga_agent.parsing import CodeRejected
-from sga_agent.task import InvalidSolution
+from sga_agent.task import CodeRejected, InvalidSolution
 from tasks.constitutive.law_shape import CLASS_NAME, law_problems
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import ast
 from collections.abc import Iterator
 
-from sga_agent.parsing import CodeRejected, Problem, dotted_name, import_aliases, parse_python
+from sga_agent.task.code import CodeRejected, Problem, dotted_name, import_aliases, parse_python
 
 CLASS_NAME = "Physics"
 

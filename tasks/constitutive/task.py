@@ -10,18 +10,30 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
-from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
-from tasks.constitutive import prompt_text
+from sga_agent.task import (
+    Assessment,
+    BuiltinProposer,
+    Evaluation,
+    EvaluationSettings,
+    PromptParts,
+    ReportView,
+    Section,
+    TaskBase,
+)
+from tasks.constitutive import prompt_text, report
 from tasks.constitutive.law_shape import check_law
 from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import SPECS, ConstitutiveSpec
 
 
-class ConstitutiveTask:
+class ConstitutiveTask(TaskBase):
     """Search a constitutive law that reproduces an observed MPM trajectory."""
 
     kind = "equation"
     options_type = ConstitutiveOptions
+    loss_label = report.LOSS_LABEL
+    #: Whether the report draws the observation beside the best law's free run.
+    draws_motion = True
     #: What the capture server loads before it confines a capture (see law_capture).
     capture_modules = ("numpy", "torch", "torch.nn", "torch.nn.functional", "torch.linalg",
                        "tasks.constitutive.law_capture")  # fmt: skip
@@ -98,6 +110,21 @@ class ConstitutiveTask:
         from tasks.constitutive.assessment import assess
 
         return assess(self.spec, artifacts, parameters, options, simulate)
+
+    def describe_assessment(self, simulate: bool) -> str:
+        return "assessing the best solution: the true law's loss (cached after the first time)" + (
+            " and the free run (the first run compiles Taichi's kernels: up to a minute)"
+            if simulate
+            else ""
+        )
+
+    def summary_lines(self, view: ReportView) -> list[str]:
+        """The best law's free-run error in body sizes."""
+        return report.free_run_line(view.assessment, view.simulate)
+
+    def report_sections(self, view: ReportView) -> list[Section]:
+        """The observation against the best law's free run (PNG and GIF)."""
+        return [report.motion_section(view)] if self.draws_motion else []
 
     def builtin_proposer(self) -> BuiltinProposer:
         """Genetic programming over law code (no model needed)."""

@@ -21,7 +21,7 @@ import json
 import re
 from dataclasses import dataclass
 
-from sga_agent.parsing import CodeRejected, Problem, parse_python
+from sga_agent.task.code import CodeRejected, Problem, parse_python
 
 _FENCE = re.compile(r"```[ \t]*([A-Za-z0-9_+-]*)[^\n]*\n(.*?)(?:```|\Z)", re.S)
 SMILES, COORDINATES = "SMILES", "coordinates"

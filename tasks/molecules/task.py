@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from sga_agent.task import (
+    Block,
     BuiltinProposer,
+    CandidateRecord,
     Evaluation,
     EvaluationSettings,
     PromptParts,
+    ReportView,
+    Section,
+    TaskBase,
     TaskKind,
 )
-from tasks.molecules import prompt_text
+from tasks.molecules import prompt_text, report
 from tasks.molecules.calibration import PROPERTY_LABELS
 from tasks.molecules.constants import DEFAULT_STEPS, DEFAULT_STRAIN_WEIGHT
 from tasks.molecules.options import MoleculeOptions
@@ -37,7 +43,7 @@ coordinates: list[list[float]] = [  # (11, 3) heavy-atom positions in Angstrom, 
 """
 
 
-class MoleculeTask:
+class MoleculeTask(TaskBase):
     """Design a molecule whose normalized HOMO, LUMO or gap hits a target value.
 
     Parameters
@@ -52,6 +58,7 @@ class MoleculeTask:
 
     kind: TaskKind = "entity"
     options_type = MoleculeOptions
+    loss_label = report.LOSS_LABEL
 
     def __init__(self, name: str, prop: str, target: float) -> None:
         if prop not in PROPERTY_LABELS:
@@ -101,6 +108,18 @@ class MoleculeTask:
         from tasks.molecules.ga import GraphGAProposer
 
         return GraphGAProposer(self.seed_solution())
+
+    def top_facts(self, candidates: Sequence[CandidateRecord]) -> list[dict[str, Any]]:
+        """Each top molecule's property on the QM9 scale and its distance to the target."""
+        return report.top_facts(candidates)
+
+    def summary_blocks(self, view: ReportView) -> list[Block]:
+        """The table of the top molecules."""
+        return report.summary_blocks(view)
+
+    def report_sections(self, view: ReportView) -> list[Section]:
+        """2D depictions of the top molecules."""
+        return [report.pictures_section(view)]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

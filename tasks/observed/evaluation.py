@@ -21,7 +21,7 @@ import torch
 from bridges import laws as torch_laws
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Assessment, Evaluation, EvaluationSettings, FreeRun
+from sga_agent.task import Assessment, Evaluation, EvaluationSettings
 from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.sysid.families import FAMILIES, material_family
 from tasks.constitutive import feedback
@@ -33,6 +33,7 @@ from tasks.constitutive.evaluation import (
     fitted_evaluation,
     warm_up_fitting,
 )
+from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law

@@ -26,6 +26,8 @@ class ObservedTask(ConstitutiveTask):
     """
 
     options_type = ObservedOptions
+    loss_label = "loss"  # the observation's units are the file's
+    draws_motion = False  # not (yet) for an observation
 
     def __init__(self, options: ObservedOptions | None = None) -> None:
         self.options = options

@@ -10,8 +10,9 @@ from collections import Counter
 
 import pytest
 
-from sga_agent.parsing import CodeRejected, check_candidate
+from sga_agent.parsing import check_candidate
 from sga_agent.registry import load_task
+from sga_agent.task import CodeRejected
 from tests.hostile.catalog import (
     CANDIDATES,
     CATEGORIES,

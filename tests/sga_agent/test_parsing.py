@@ -4,9 +4,9 @@ import textwrap
 
 import pytest
 
-from sga_agent.parsing import CodeRejected, check_candidate, check_code, parse_response
+from sga_agent.parsing import check_candidate, check_code, parse_response
 from sga_agent.registry import load_task, task_names
-from sga_agent.task import PromptParts
+from sga_agent.task import CodeRejected, PromptParts
 from tests.tasks.observed.conftest import ready_task
 
 RESPONSE = """\

@@ -12,7 +12,6 @@ import pytest
 from click.testing import CliRunner
 
 from sga_agent.cli import main
-from sga_agent.report import pictures
 from sga_agent.report.plots import DPI, curves_size
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
@@ -174,6 +173,7 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     from sga_agent.registry import load_task
     from sga_agent.task import EvaluationSettings
     from tasks.constitutive.evaluation import ensure_runtime
+    from tasks.constitutive.report import MOTION_FRAMES
 
     ensure_runtime("float32")
     steps = 200
@@ -236,7 +236,7 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     page = (folder / "report.html").read_text()
     assert "amount to (computed from the captured graph):\n\n- `" in md
     assert page.count("<li>") == len(list_items(md))  # each list, the derived values too
-    assert png_size(folder / "motion.png") == (round(2.8 * pictures.MOTION_FRAMES * DPI), 6 * DPI)
+    assert png_size(folder / "motion.png") == (round(2.8 * MOTION_FRAMES * DPI), 6 * DPI)
     assert png_size(folder / "zigzag.png") == (9 * DPI, round(4.2 * DPI))
     assert (folder / "motion.gif").read_bytes()[:6] == b"GIF89a"
 

@@ -5,8 +5,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from sga_agent.parsing import CodeRejected, check_candidate
+from sga_agent.parsing import check_candidate
 from sga_agent.registry import load_task
+from sga_agent.task import CodeRejected
 from tasks.constitutive.law_code import LawCodeError, load_law
 from tasks.constitutive.law_shape import check_law
 from tests.sga_agent.test_parsing import law

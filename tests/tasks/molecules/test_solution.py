@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from sga_agent.parsing import CodeRejected, check_candidate
+from sga_agent.parsing import check_candidate
 from sga_agent.registry import load_task
+from sga_agent.task import CodeRejected
 from tasks.molecules.solution import ProposalError, format_solution, parse_solution
 
 TASK = load_task("homo")

@@ -12,8 +12,13 @@ import json
 import math
 from typing import Any
 
-from sga_agent.parsing import CodeRejected
-from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, PromptParts
+from sga_agent.task import (
+    CodeRejected,
+    Evaluation,
+    EvaluationSettings,
+    InvalidSolution,
+    PromptParts,
+)
 
 TARGET = (1.0, 2.0, 3.0)
 

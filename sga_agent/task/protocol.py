@@ -1,0 +1,230 @@
+"""The contract itself: what a task must provide (:class:`Task`), every hook it may provide
+with its default (:class:`TaskBase`), and the proposer it may offer (:class:`BuiltinProposer`).
+
+The agent reaches a task only through :func:`as_task` (the registry applies it), so it calls
+every hook without asking whether the task has it. Standard library only (part of the
+protocol package :mod:`sga_agent.task`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+from sga_agent.task.records import (
+    Assessment,
+    Evaluation,
+    EvaluationSettings,
+    NoOptions,
+    Parent,
+    PromptParts,
+    TaskKind,
+)
+from sga_agent.task.report import Block, CandidateRecord, ReportView, Section
+
+
+@runtime_checkable
+class Task(Protocol):
+    """What every task provides: a scientific problem the search can work on.
+
+    ``kind`` is ``"equation"`` (code with continuous parameters fitted by the inner loop) or
+    ``"entity"`` (a structure, such as a molecule, whose continuous part is optimized).
+    ``name`` is the registry name, ``description`` one line for ``sga-agent tasks``.
+    The optional hooks are those of :class:`TaskBase`.
+    """
+
+    name: str
+    description: str
+    kind: TaskKind
+
+    def seed_solution(self) -> str:
+        """The bootstrap solution (code text) the search starts from."""
+        ...
+
+    def prompt_parts(self) -> PromptParts:
+        """Task-specific prompt text."""
+        ...
+
+    def capture(self, solution: str) -> dict[str, Any]:
+        """Turn ``solution`` into JSON data; runs its code, in the capture process only.
+
+        Raises :class:`~sga_agent.task.InvalidSolution` (with a one-line reason) for an
+        unusable solution.
+        """
+        ...
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        """Check the captured ``data`` and score it; never runs solution code, never raises
+        for a bad candidate (its data is untrusted: check everything)."""
+        ...
+
+
+@runtime_checkable
+class BuiltinProposer(Protocol):
+    """An LLM-free proposer a task may offer (:meth:`TaskBase.builtin_proposer`).
+
+    It plays the model's part without a model: from the current top-K parents it writes ``n``
+    new solutions, each an answer text holding one ```python block. ``temperature`` is the
+    search's exploit (low) or explore (high) temperature: low means small changes to good
+    parents, high means bolder ones. Everything random derives from ``seed``, so a call with
+    the same arguments returns the same answers. An optional attribute ``task_options`` (a
+    dict) names the task options it is meant to run with (options a run sets win).
+    """
+
+    name: str
+
+    def propose_from(
+        self, parents: Sequence[Parent], temperature: float, n: int, seed: int
+    ) -> list[str]: ...
+
+
+class TaskBase:
+    """A task's optional hooks, each with its default: subclass it and override what applies.
+
+    A subclass still provides what :class:`Task` requires (``name``, ``description``,
+    ``kind``, ``seed_solution``, ``prompt_parts``, ``capture``, ``evaluate``). A plugin that
+    does not subclass it is wrapped by :func:`as_task`, which gives it these defaults.
+    """
+
+    name: str
+    description: str
+    kind: TaskKind
+
+    #: The options' dataclass: fields with defaults typed ``int``, ``float``, ``bool``, ``str``
+    #: or a ``Literal`` of strings (optionally ``| None``), whose ``__post_init__`` raises
+    #: ``ValueError`` for a bad value. ``--option KEY=VALUE`` is checked against it before
+    #: anything runs; ``EvaluationSettings.options`` then holds the given options, typed.
+    options_type: ClassVar[type] = NoOptions
+    #: Modules the capture server imports once, before it confines any capture (torch, the
+    #: task's own capture module): a confined capture may be unable to import them.
+    capture_modules: ClassVar[tuple[str, ...]] = ()
+    #: What a loss is, for the report's axes ("loss: mean squared position error (m²)").
+    loss_label: ClassVar[str] = "loss"
+
+    # ------------------------------------------------------------------ solutions
+
+    def check_solution(self, code: str) -> None:
+        """Check the shape of a solution's code statically (without running it: a class with
+        the right methods, the right literals); raise
+        :class:`~sga_agent.task.CodeRejected`, whose message is feedback for the model.
+
+        The search and ``sga-agent evaluate`` run it after their generic safety checks
+        (:func:`sga_agent.parsing.check_candidate`), before anything is captured; code that
+        does not parse is not shown to it. Default: any code is accepted.
+        """
+
+    def solution_with_parameters(self, solution: str, parameters: dict[str, float]) -> str:
+        """``solution`` with its fitted ``parameters`` written in, for people to read (the end
+        of a search, reports); it must not run the solution's code. Default: unchanged."""
+        return solution
+
+    def with_options(self, options: dict[str, Any]) -> TaskBase:
+        """The task set up for a run's ``options`` (typed, as ``EvaluationSettings.options``
+        holds them) where its seed, prompt or built-in proposer depend on them (a task whose
+        data is a file named by an option). Default: the task itself."""
+        return self
+
+    def builtin_proposer(self) -> BuiltinProposer | None:
+        """An LLM-free proposer (``--proposer builtin``); default: None, the task has none."""
+        return None
+
+    # ------------------------------------------------------------------ helper processes
+
+    def warm_up_solutions(self) -> list[str]:
+        """Solutions a capture server captures when it starts, so that later captures find
+        everything loaded. Default: the seed."""
+        return [self.seed_solution()]
+
+    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None] | None:
+        """Run by a fit worker once it is ready, with the options its evaluations will use:
+        load data, compile kernels; it runs no candidate code. An iterator (a generator
+        yielding between stages) is run in stages, the most needed first, none starting while
+        a candidate waits (see :mod:`sga_agent.fit_worker`). Default: nothing to warm."""
+        return None
+
+    # ------------------------------------------------------------------ findings
+
+    def assess(
+        self,
+        artifacts: dict[str, Any] | None,
+        parameters: dict[str, float],
+        options: dict[str, Any],
+        simulate: bool,
+    ) -> Assessment | None:
+        """What only the task knows about a run's best solution, given the artifacts its
+        evaluation left (the captured data included), its fitted parameters and the run's task
+        options: the ground truth's name and loss, readable derived values and (if
+        ``simulate``) a free run. Trusted code: it must not load or run the solution's code,
+        only what the capture recorded. Default: None, nothing to add."""
+        return None
+
+    def describe_assessment(self, simulate: bool) -> str:
+        """What :meth:`assess` is about to do, told to the reader before it starts when it may
+        take a while; default: "" (nothing to tell)."""
+        return ""
+
+    def top_facts(self, candidates: Sequence[CandidateRecord]) -> list[dict[str, Any]]:
+        """JSON facts about the run's best distinct candidates (best first), for
+        ``summary.json`` and the report; the molecule tasks give each molecule's property in
+        Hartree and eV. Default: none."""
+        return []
+
+    # ------------------------------------------------------------------ report
+
+    def summary_lines(self, view: ReportView) -> list[str]:
+        """Lines (``- ...``) added to the report summary's list after the losses (a free run's
+        error). Default: none."""
+        return []
+
+    def summary_blocks(self, view: ReportView) -> list[Block]:
+        """Blocks shown under the report summary's list in place of the best solution's code
+        (a table of the top molecules). Default: none, the code is shown."""
+        return []
+
+    def report_sections(self, view: ReportView) -> list[Section]:
+        """Sections placed after the report's summary (the task's own pictures, drawn into
+        ``view.folder``); a failure should become a note, not an exception. Default: none."""
+        return []
+
+
+#: What :class:`Task` requires, and the hooks of :class:`TaskBase`.
+REQUIRED = ("name", "description", "kind", "seed_solution", "prompt_parts", "capture", "evaluate")
+HOOKS = tuple(name for name in vars(TaskBase) if not name.startswith("_"))
+
+
+class _Adapted(TaskBase):
+    """A plugin that does not subclass :class:`TaskBase`: its own members, else the defaults.
+    The one place that looks at which hooks a plugin has."""
+
+    def __init__(self, plugin: Task) -> None:
+        self.plugin = plugin
+        for member in (*REQUIRED, *HOOKS):
+            if hasattr(plugin, member):
+                setattr(self, member, getattr(plugin, member))
+
+    def __repr__(self) -> str:
+        return repr(self.plugin)
+
+
+def as_task(task: Task) -> TaskBase:
+    """``task`` with every hook of :class:`TaskBase`: itself when it subclasses it, else
+    wrapped so that the hooks it lacks take their defaults."""
+    return task if isinstance(task, TaskBase) else _Adapted(task)
+
+
+def options_type(task: Task) -> type:
+    """The dataclass of ``task``'s options (:attr:`TaskBase.options_type`)."""
+    return as_task(task).options_type
+
+
+def solution_with_parameters(task: Task | None, solution: str, parameters: dict[str, float]) -> str:
+    """``solution`` with its fitted ``parameters`` written in by ``task``
+    (:meth:`TaskBase.solution_with_parameters`); unchanged without a task or parameters."""
+    if task is None or not parameters:
+        return solution
+    return as_task(task).solution_with_parameters(solution, parameters)
+
+
+def configured(task: Task, options: dict[str, Any]) -> TaskBase:
+    """``task`` set up for ``options`` (:meth:`TaskBase.with_options`)."""
+    return as_task(as_task(task).with_options(options))

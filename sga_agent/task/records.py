@@ -1,0 +1,186 @@
+"""The records a task and the search exchange: settings, evaluations, prompt text, what a task
+knows of a run's best solution, the parents a built-in proposer works from.
+
+Standard library only (part of the protocol package :mod:`sga_agent.task`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+TaskKind = Literal["equation", "entity"]
+#: Outcome of an evaluation: scored, or why not (invalid code, an exception, NaN/inf, a limit).
+STATUSES = ("ok", "invalid", "error", "unstable", "timeout", "out_of_memory", "crashed")
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """How hard a task's inner optimization works on one candidate.
+
+    Parameters
+    ----------
+    epochs : int, optional
+        Inner-optimization steps; ``None`` uses the task's default.
+    learning_rate : float, optional
+        Step size of the inner optimizer; ``None`` uses the task's default.
+    seed : int
+        Seed for any randomness of the evaluation.
+    options : dict
+        Task-specific settings: fields of the task's ``options_type`` (see :class:`Task`).
+    """
+
+    epochs: int | None = None
+    learning_rate: float | None = None
+    seed: int = 0
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.epochs is not None and (not isinstance(self.epochs, int) or self.epochs < 0):
+            raise ValueError(f"epochs must be a non-negative integer or None, got {self.epochs!r}")
+        if self.learning_rate is not None and not self.learning_rate > 0:
+            raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+
+
+#: How native libraries (torch's allocator, Taichi) report a failed allocation.
+_ALLOCATION_FAILURE = re.compile(r"allocate memory|memory allocation|out of memory", re.IGNORECASE)
+
+
+def is_out_of_memory(error: BaseException) -> bool:
+    """Whether ``error`` is a failed allocation (an ``out_of_memory`` outcome)."""
+    return isinstance(error, MemoryError) or bool(_ALLOCATION_FAILURE.search(str(error)))
+
+
+class InvalidSolution(ValueError):
+    """Raised by ``Task.capture`` for a solution that cannot be used; one line for the model."""
+
+
+@dataclass
+class Evaluation:
+    """Outcome of evaluating one candidate solution.
+
+    ``valid`` is False when the candidate could not be scored; ``status`` says how (one of
+    :data:`STATUSES`: "invalid" code, an "error" raised, "unstable" NaN/inf, or a sandbox limit:
+    "timeout", "out_of_memory", "crashed"), ``reason`` says why in one line and ``loss`` is inf.
+    ``feedback`` is the text shown to the model in later prompts. ``parameters`` are the fitted
+    values of the best epoch, ``curves`` maps a name ("loss", a parameter name) to its values
+    over the inner optimization, ``extras`` holds any further JSON-serialisable record and
+    ``artifacts`` larger data that reports draw from (kept in the candidate's folder, not in the
+    run's event log), such as the best epoch's trajectory.
+    """
+
+    valid: bool
+    loss: float
+    feedback: str
+    reason: str = ""
+    parameters: dict[str, float] = field(default_factory=dict)
+    curves: dict[str, list[float]] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    seconds: float = 0.0
+    status: str = "ok"
+    artifacts: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+
+    @classmethod
+    def invalid(
+        cls, reason: str, feedback: str | None = None, status: str = "invalid", **fields: Any
+    ) -> Evaluation:
+        """An unscored candidate: infinite loss, the reason doubling as feedback by default."""
+        text = feedback if feedback is not None else reason
+        return cls(False, math.inf, text, reason, status=status, **fields)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (an infinite loss becomes the string "inf")."""
+        data = asdict(self)
+        data["loss"] = _encode_float(self.loss)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Evaluation:
+        """Inverse of :meth:`to_dict`."""
+        data = dict(data)
+        data["loss"] = float(data["loss"])
+        return cls(**data)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+
+def _encode_float(value: float) -> float | str:
+    return value if math.isfinite(value) else str(value)
+
+
+@dataclass(frozen=True)
+class PromptParts:
+    """The task-specific text the prompt templates are filled with.
+
+    Parameters
+    ----------
+    role : str
+        Who the model is asked to be (the system prompt's expertise sentence).
+    context : str
+        What is being searched for and how a solution is scored.
+    template : str
+        The code skeleton every proposal must follow.
+    requirements : str
+        Task-specific rules for the code (shapes, units, allowed operations, tips).
+    """
+
+    role: str
+    context: str
+    template: str
+    requirements: str
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """The options of a task that declares none."""
+
+
+@dataclass
+class Assessment:
+    """What only the task knows about a run's best solution (``Task.assess``).
+
+    Parameters
+    ----------
+    truth : str
+        The ground truth's name ("" when the task has none).
+    truth_loss : float, optional
+        The ground truth's loss when scored like a candidate.
+    derived : dict of str to float
+        Values derived from the fitted parameters that read better than them
+        (``{"exp(log_E)": 4.4e5}``).
+    free_run : object, optional
+        The task's own record of the best solution run on its own (the constitutive tasks'
+        ``FreeRun``: simulated from the initial state without teacher forcing). The agent only
+        calls its ``to_dict()`` (``summary.json``'s ``free_run``); the task's report hooks
+        read the rest.
+    """
+
+    truth: str = ""
+    truth_loss: float | None = None
+    derived: dict[str, float] = field(default_factory=dict)
+    free_run: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "truth": self.truth, "truth_loss": self.truth_loss, "derived": self.derived,
+            "free_run": None if self.free_run is None else self.free_run.to_dict(),
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Parent:
+    """An evaluated solution a built-in proposer may mutate or cross: its code, its loss and
+    the fitted values of its continuous parameters (``Evaluation.parameters``; empty when none
+    were fitted), so a child may start where its parent's inner optimization ended."""
+
+    code: str
+    loss: float
+    parameters: dict[str, float] = field(default_factory=dict)
