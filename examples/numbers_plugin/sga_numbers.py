@@ -4,7 +4,8 @@ A solution is a JSON list of numbers (``[1.0, 2.5, 3.0]``); its loss is the squa
 to :data:`TARGET`. The task checks that format statically (``check_solution``), turns the text
 into data in the sandbox (``capture``: here nothing needs to run) and scores the data without
 trusting it (``evaluate``). It also offers an LLM-free proposer, so that
-``sga-agent search --task numbers`` runs without a model.
+``sga-agent search --task numbers`` runs without a model. ``test_sga_numbers.py`` checks it
+against the plugin contract.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from sga_agent.task import (
     InvalidSolution,
     Parent,
     PromptParts,
+    TaskBase,
 )
 
 TARGET = (1.0, 2.0, 3.0)
@@ -41,8 +43,12 @@ def parse_numbers(text: str) -> list[float]:
     return [float(v) for v in values]
 
 
-class NumbersTask:
-    """Find three numbers; the loss is the squared distance to a hidden target."""
+class NumbersTask(TaskBase):
+    """Find three numbers; the loss is the squared distance to a hidden target.
+
+    ``TaskBase`` gives every optional hook its default; this task overrides two of them,
+    ``check_solution`` and ``builtin_proposer``.
+    """
 
     name = "numbers"
     description = "Find three hidden numbers (a third-party example task)."

@@ -77,7 +77,8 @@ def test_every_example_is_on_the_site_and_every_included_file_exists():
     files = included()
     assert all(path.is_file() for path in files), sorted(p for p in files if not p.is_file())
     scripts = {p for p in EXAMPLES.glob("*.py")}
-    plugin = {EXAMPLES / "numbers_plugin" / n for n in ("sga_numbers.py", "pyproject.toml")}
+    plugin = {EXAMPLES / "numbers_plugin" / n
+              for n in ("sga_numbers.py", "test_sga_numbers.py", "pyproject.toml")}  # fmt: skip
     assert scripts | plugin <= files, sorted(scripts | plugin - files)
     assert set(OUTPUTS.glob("*.txt")) <= files, "a recorded output no page shows"
     # Every other example on the site is a ground-truth law, run by the constitutive tests
@@ -114,9 +115,9 @@ def test_sysid_cube():
 
 @pytest.mark.slow
 def test_the_plugin_tutorial(tmp_path: Path):
-    """The tutorial's commands: pip installs the plugin, sga-agent lists it, evaluates a
-    solution, searches with the plugin's own proposer (capture and fit processes included)
-    and replays the recorded search."""
+    """The tutorial's commands: pip installs the plugin, its conformance test passes,
+    sga-agent lists it, evaluates a solution, searches with the plugin's own proposer
+    (capture and fit processes included) and replays the recorded search."""
     source = shutil.copytree(EXAMPLES / "numbers_plugin", tmp_path / "numbers_plugin")
     site = tmp_path / "site"
     subprocess.run(
@@ -127,6 +128,10 @@ def test_the_plugin_tutorial(tmp_path: Path):
     assert (site / "sga_numbers.py").is_file()
     env = environment(PYTHONPATH=str(site))
     agent = [sys.executable, "-m", "sga_agent"]
+
+    checked = run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                   "numbers_plugin/test_sga_numbers.py"], cwd=tmp_path, env=env)  # fmt: skip
+    assert "1 passed" in checked  # the plugin's own conformance test
 
     listed = run([*agent, "tasks"], cwd=tmp_path, env=env)
     assert re.search(r"^numbers\s+entity\s+Find three hidden numbers", listed, re.MULTILINE)
