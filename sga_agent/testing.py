@@ -208,6 +208,7 @@ def _report_hooks(task: Task, full: TaskBase) -> None:
     for simulate in (True, False):
         _expect(isinstance(full.describe_assessment(simulate), str), "describe_assessment: str")
     _expect(full.top_facts([]) == [], "top_facts([]) must be []")
+    _expect(isinstance(full.screen_lines({}), list), "screen_lines must return a list")
     with tempfile.TemporaryDirectory() as folder:  # a run that scored nothing
         view = ReportView(task.name, None, [], Assessment(), Path(folder), False)
         _expect(all(isinstance(line, str) for line in full.summary_lines(view)),

@@ -18,7 +18,7 @@ from sga_agent.config import SearchConfig
 from sga_agent.run_store import Recorded, RunStore
 from sga_agent.runner import BUILTIN, REPLAY_PREFIX
 from sga_agent.search import SEED, SearchResult
-from sga_agent.task import Evaluation, solution_with_parameters
+from sga_agent.task import Evaluation, Task, as_task, solution_with_parameters
 
 
 def uses_a_model(config: SearchConfig) -> bool:
@@ -98,7 +98,7 @@ def print_result(
     store: RunStore,
     result: SearchResult,
     as_json: bool,
-    task: object,
+    task: Task,
     config: SearchConfig,
 ) -> None:
     """The final screen: the top-K table, the best solution against the seed, the best
@@ -119,7 +119,8 @@ def print_result(
     best = result.best
     if best is not None and best.valid:
         console.print(_comparison(best.candidate, best.loss, seed))
-        for line in _findings_lines(summary.get("findings") or {}):
+        findings = summary.get("findings") or {}
+        for line in [*_truth_lines(findings), *as_task(task).screen_lines(findings)]:
             console.print(line)
         if best.parameters:
             console.print("its code, with the fitted constants written in:")
@@ -148,27 +149,16 @@ def _comparison(candidate: str, loss: float, seed: Evaluation | None) -> str:
     return line + f", {_ratio(seed, loss)}x below the seed's {seed.loss:.4g}"
 
 
-def _findings_lines(findings: dict[str, Any]) -> list[str]:
-    """The ground truth with its loss against the best, and the best law's free-run error, as
-    the report's summary states them."""
-    lines = []
-    if findings.get("truth"):
-        line = f"ground truth: {findings['truth']}"
-        if findings.get("truth_loss") is not None:
-            line += f"; its loss {findings['truth_loss']:.4g}"
-            if findings.get("best_over_truth") is not None:
-                line += f", {findings['best_over_truth']:.3g}x below the best's"
-        lines.append(line)
-    free = findings.get("free_run")
-    if free and not free.get("unstable"):
-        lines.append(
-            f"free run of the best (no teacher forcing): RMS position error "
-            f"{100 * free['final_error']:.3g}% of the body size at the end, "
-            f"{100 * free['mean_error']:.3g}% on average"
-        )
-    elif free:
-        lines.append(f"free run of the best: unstable ({free['unstable']})")
-    return lines
+def _truth_lines(findings: dict[str, Any]) -> list[str]:
+    """The ground truth with its loss against the best, as the report's summary states it."""
+    if not findings.get("truth"):
+        return []
+    line = f"ground truth: {findings['truth']}"
+    if findings.get("truth_loss") is not None:
+        line += f"; its loss {findings['truth_loss']:.4g}"
+        if findings.get("best_over_truth") is not None:
+            line += f", {findings['best_over_truth']:.3g}x below the best's"
+    return [line]
 
 
 def _counts(evaluations: Any, result: SearchResult, spend: bool) -> str:

@@ -171,6 +171,11 @@ class TaskBase:
 
     # ------------------------------------------------------------------ report
 
+    def screen_lines(self, findings: dict[str, Any]) -> list[str]:
+        """Lines for the end of a search's screen, after the best loss and the ground truth,
+        from ``summary.json``'s ``findings`` (a free run's error). Default: none."""
+        return []
+
     def summary_lines(self, view: ReportView) -> list[str]:
         """Lines (``- ...``) added to the report summary's list after the losses (a free run's
         error). Default: none."""

@@ -5,6 +5,7 @@ the observed motion beside the best law's free run (a PNG of a few steps, a GIF 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +30,20 @@ def free_run_line(assessment: Assessment | None, simulate: bool) -> list[str]:
         f"{run.steps} steps): RMS position error **{100 * run.final_error:.3g}%** of the body "
         f"size at the end, {100 * run.mean_error:.3g}% on average (body size "
         f"{run.body_size:.3g} m)"
+    ]
+
+
+def free_run_screen_lines(findings: dict[str, Any]) -> list[str]:
+    """The best law's free-run error, for the end of a search's screen (from summary.json)."""
+    free = findings.get("free_run")
+    if not free:
+        return []
+    if free.get("unstable"):
+        return [f"free run of the best: unstable ({free['unstable']})"]
+    return [
+        f"free run of the best (no teacher forcing): RMS position error "
+        f"{100 * free['final_error']:.3g}% of the body size at the end, "
+        f"{100 * free['mean_error']:.3g}% on average"
     ]
 
 

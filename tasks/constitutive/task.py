@@ -118,6 +118,10 @@ class ConstitutiveTask(TaskBase):
             else ""
         )
 
+    def screen_lines(self, findings: dict[str, Any]) -> list[str]:
+        """The best law's free-run error."""
+        return report.free_run_screen_lines(findings)
+
     def summary_lines(self, view: ReportView) -> list[str]:
         """The best law's free-run error in body sizes."""
         return report.free_run_line(view.assessment, view.simulate)
