@@ -1,6 +1,6 @@
-"""Every built-in task, the example plugin of ``examples/numbers_plugin`` and the third-party
-test task keep the plugin contract (:func:`sga_agent.testing.check_task`); the check itself
-finds what a plugin gets wrong."""
+"""Every built-in task, the example plugin of ``examples/numbers_plugin`` and a plugin that
+does not subclass ``TaskBase`` keep the plugin contract (:func:`sga_agent.testing.check_task`);
+the check itself finds what a plugin gets wrong."""
 
 from __future__ import annotations
 
@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 
 from sga_agent.registry import load_task, task_names
-from sga_agent.task import CodeRejected, TaskBase, as_task
+from sga_agent.task import CodeRejected, Evaluation, PromptParts, TaskBase, as_task
 from sga_agent.testing import ContractError, check_task
 from tests.tasks.observed.conftest import observation_arrays
-from tests.tasks.third_party.numbers_task import NumbersTask
 
 ROOT = Path(__file__).resolve().parents[1]
 BUILT_IN = ["elastic", "plasticine", "granular", "fluid", "imaginary", "homo", "lumo", "gap",
@@ -50,20 +49,45 @@ def test_the_example_plugin_keeps_the_contract_and_scores_its_seed():
     check_task(example_plugin().NumbersTask())
 
 
+class Plain:
+    """A plugin written without ``TaskBase``: what is required, and one hook."""
+
+    name, description, kind = "plain", "Guess zero.", "entity"
+
+    def seed_solution(self) -> str:
+        return "0\n"
+
+    def prompt_parts(self) -> PromptParts:
+        return PromptParts("a guesser", "guess zero", "x", "one number")
+
+    def check_solution(self, code: str) -> None:
+        if not code.strip().lstrip("-").isdigit():
+            raise CodeRejected("give one whole number")
+
+    def capture(self, solution: str) -> dict:
+        return {"value": solution.strip()}
+
+    def evaluate(self, data, settings) -> Evaluation:
+        value = data.get("value") if isinstance(data, dict) else None
+        if not isinstance(value, str) or not value.lstrip("-").isdigit():
+            return Evaluation.invalid("no number was captured")
+        return Evaluation(True, float(int(value)) ** 2, "squared")
+
+
 def test_a_plugin_that_does_not_subclass_task_base_gets_the_defaults():
-    plain = NumbersTask()
+    plain = Plain()
     assert not isinstance(plain, TaskBase)
     check_task(plain)
     task = as_task(plain)
-    assert task.name == "numbers" and task.loss_label == "loss"
+    assert task.name == "plain" and task.loss_label == "loss"
     assert task.warm_up_solutions() == [plain.seed_solution()]
-    assert task.builtin_proposer() is None  # the default
+    assert task.builtin_proposer() is None  # the defaults
     assert task.assess(None, {}, {}, False) is None
     with pytest.raises(CodeRejected):
-        task.check_solution("[1]")  # its own
+        task.check_solution("one")  # its own
 
 
-class Broken(NumbersTask):
+class Broken(example_plugin().NumbersTask):
     """Wrong in several ways at once."""
 
     description = None

@@ -1,10 +1,12 @@
-"""A task defined outside sga_agent, with its own solution format (a JSON list of numbers),
-installed through a real entry point of the ``sga_agent.tasks`` group and searched end to end
-(``sga-agent search --replay``: sandboxed capture and fit processes included)."""
+"""The documented third-party plugin (``examples/numbers_plugin``: its own solution format, a
+JSON list of numbers), registered through a real entry point of the ``sga_agent.tasks`` group
+(a dist-info folder) and searched end to end (``sga-agent search --replay``: sandboxed capture
+and fit processes included)."""
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -16,7 +18,9 @@ from sga_agent.config import SearchConfig
 from sga_agent.events import ProposalReceived
 from sga_agent.proposers.base import Proposal
 from sga_agent.run_store import RunStore
-from tests.plugins import register_task
+from tests.plugins import REPO, register_task
+
+PLUGIN = REPO / "examples" / "numbers_plugin"
 
 #: The recorded answers the replay gives: (candidate, answer text).
 ANSWERS = [
@@ -32,9 +36,10 @@ def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]
     """The task registered by a dist-info on the path, here and for every process started
     with the returned environment (the CLI, its capture and fit workers)."""
     site = tmp_path / "site"
-    env = register_task(site, "numbers", "tests.tasks.third_party.numbers_task:NumbersTask")
+    env = register_task(site, "numbers", "sga_numbers:NumbersTask")
     monkeypatch.syspath_prepend(str(site))
-    return env
+    monkeypatch.syspath_prepend(str(PLUGIN))  # the plugin's module, as pip would install it
+    return {**env, "PYTHONPATH": os.pathsep.join([str(PLUGIN), env["PYTHONPATH"]])}
 
 
 def recorded_run(parent: Path) -> Path:
