@@ -204,10 +204,28 @@ def _builtin(full: TaskBase) -> None:
                 "each built-in answer must hold one ```python block")  # fmt: skip
 
 
+@dataclasses.dataclass
+class _Recorded:
+    """A candidate as the report reads it back, recorded without extras or parameters."""
+
+    code: str
+    id: str = "00-seed"
+    status: str = "ok"
+    loss: float = 1.0
+    parameters: dict[str, float] = dataclasses.field(default_factory=dict)
+    extras: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def artifacts(self) -> dict[str, Any]:
+        return {}
+
+
 def _report_hooks(task: Task, full: TaskBase) -> None:
     for simulate in (True, False):
         _expect(isinstance(full.describe_assessment(simulate), str), "describe_assessment: str")
     _expect(full.top_facts([]) == [], "top_facts([]) must be []")
+    nothing = _Recorded(full.seed_solution())
+    key = full.solution_key(nothing)
+    _expect(key is None or isinstance(key, str), "solution_key must return a str or None")
     _expect(isinstance(full.screen_lines({}), list), "screen_lines must return a list")
     with tempfile.TemporaryDirectory() as folder:  # a run that scored nothing
         view = ReportView(task.name, None, [], Assessment(), Path(folder), False)

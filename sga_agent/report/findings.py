@@ -83,12 +83,13 @@ def _brief(candidate: Candidate | None) -> dict[str, Any] | None:
 
 
 def law_key(task: Task | None, candidate: Candidate) -> str:
-    """What makes two candidates the same solution for "distinct": the SMILES of a molecule,
-    else the fingerprint of the code with every fitted parameter's starting value set to 0
-    (so that children that differ from their parent only in where its fit started count as
-    one law)."""
-    if candidate.extras.get("smiles"):
-        return "smiles:" + str(candidate.extras["smiles"])
+    """What makes two candidates the same solution for "distinct": the task's own
+    ``solution_key`` (a molecule's SMILES), else the fingerprint of the code with every fitted
+    parameter's starting value set to 0 (so that children that differ from their parent only
+    in where its fit started count as one law)."""
+    own = as_task(task).solution_key(candidate) if task is not None else None
+    if own is not None:
+        return own
     zeros = dict.fromkeys(candidate.parameters, 0.0)
     return fingerprint(solution_with_parameters(task, candidate.code, zeros))
 

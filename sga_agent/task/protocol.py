@@ -163,6 +163,12 @@ class TaskBase:
         take a while; default: "" (nothing to tell)."""
         return ""
 
+    def solution_key(self, candidate: CandidateRecord) -> str | None:
+        """What makes two recorded candidates the same solution when the report picks the
+        top distinct ones (a molecule's SMILES). Default: None, the code with its fitted
+        parameters' starting values set to 0."""
+        return None
+
     def top_facts(self, candidates: Sequence[CandidateRecord]) -> list[dict[str, Any]]:
         """JSON facts about the run's best distinct candidates (best first), for
         ``summary.json`` and the report; the molecule tasks give each molecule's property in

@@ -109,6 +109,11 @@ class MoleculeTask(TaskBase):
 
         return GraphGAProposer(self.seed_solution())
 
+    def solution_key(self, candidate: CandidateRecord) -> str | None:
+        """The molecule's SMILES, as evaluated."""
+        smiles = candidate.extras.get("smiles")
+        return f"smiles:{smiles}" if smiles else None
+
     def top_facts(self, candidates: Sequence[CandidateRecord]) -> list[dict[str, Any]]:
         """Each top molecule's property on the QM9 scale and its distance to the target."""
         return report.top_facts(candidates)
