@@ -79,7 +79,14 @@ def test_report_has_every_section_and_figure(tmp_path):
 
 
 def list_items(md: str) -> list[str]:
-    return [line[2:] for line in md.splitlines() if line.startswith("- ")]
+    """The Markdown's list items, not counting lines of code blocks (the feedback's)."""
+    items, fenced = [], False
+    for line in md.splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+        elif line.startswith("- ") and not fenced:
+            items.append(line[2:])
+    return items
 
 
 def test_a_list_after_a_line_of_text_renders_as_a_list():
