@@ -23,7 +23,10 @@ shut down, or its head node died), every later evaluation would fail too, so the
 ``sga-agent resume`` evaluates them once a cluster is back.
 
 The search must run on a node of the cluster (usually the head), as every Ray driver does. Ray's
-own messages about lost workers and nodes go to its log files, not to the search's screen.
+own messages about lost workers and nodes go to its log files, not to the search's screen. Ray
+runs its workers, and so the slots' helpers, at nice 15 unless a node is started with
+``RAY_worker_niceness=0``: on nodes shared with other work, start them so (the local instance
+a pool starts itself does).
 
 Ray is an optional dependency (:data:`RAY_INSTALL`), imported when a pool is created.
 """
@@ -49,6 +52,8 @@ from sga_agent.task import Evaluation, EvaluationSettings
 
 #: How to install the optional dependency.
 RAY_INSTALL = 'pip install "sga-agent[ray]"'
+#: Ray's setting of its workers' nice value (15 unless set when a node starts).
+WORKER_NICENESS = "RAY_worker_niceness"
 #: Further slots a candidate is tried on when its slot's process or node dies meanwhile
 #: (failures of the candidate itself are never retried).
 SLOT_RETRIES = 1
@@ -372,7 +377,15 @@ def _connect(ray: ModuleType, address: str | None, local_cpus: int | None) -> No
     """``ray.init``: a new local instance for None, else the cluster at ``address``."""
     quiet = {"log_to_driver": False, "logging_level": logging.WARNING}
     if address is None:
-        ray.init(address="local", num_cpus=local_cpus, include_dashboard=False, **quiet)
+        # Ray starts its workers at nice 15 by default, behind every other process of the
+        # machine: the instance of this run evaluates at the search's own priority instead
+        given = os.environ.get(WORKER_NICENESS)
+        os.environ[WORKER_NICENESS] = given or "0"  # read by the processes ray.init starts
+        try:
+            ray.init(address="local", num_cpus=local_cpus, include_dashboard=False, **quiet)
+        finally:
+            if given is None:
+                del os.environ[WORKER_NICENESS]
         return
     if address != "auto":  # ray.init would retry an unreachable address for minutes
         host, _, port = address.rpartition(":")

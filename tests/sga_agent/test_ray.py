@@ -83,7 +83,8 @@ class LiteralTask:
         if action.startswith("hang:"):
             time.sleep(3600)
         return Evaluation(
-            True, loss, f"loss {loss}", parameters={"x": loss}, curves={"loss": [2 * loss, loss]}
+            True, loss, f"loss {loss}", parameters={"x": loss}, curves={"loss": [2 * loss, loss]},
+            extras={"nice": os.nice(0)},  # a Ray worker's fit runs at the local pool's priority
         )
 
 
