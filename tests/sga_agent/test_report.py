@@ -274,3 +274,25 @@ class Physics(nn.Module):
     assert derived.keys() == {"exp(log_e)", "(sigmoid(nu_logit) * 0.49)"}
     assert derived["exp(log_e)"] == pytest.approx(np.exp(13.0))
     assert derived["(sigmoid(nu_logit) * 0.49)"] == pytest.approx(0.49 / (1 + np.exp(-0.5)))
+
+
+def test_the_runner_adds_the_findings_the_search_core_leaves_out(tmp_path):
+    """The search writes its totals to summary.json and knows nothing of findings; the runner
+    then adds them, read back from the run folder as the report reads them."""
+    from sga_agent.runner import record_findings
+
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    Search(cfg, FakeTask(), Scripted(answers), CurvesAndFailures(), store).run()
+    totals = store.summary()
+    assert "findings" not in totals and totals["best"]["candidate"] == "02-exploit-00"
+
+    record_findings(store, FakeTask())
+    summary = store.summary()
+    assert {key: summary[key] for key in totals} == totals  # the totals stay as they were
+    findings = summary["findings"]
+    assert findings["best"] == {"candidate": "02-exploit-00", "loss": 1.0, "status": "ok"}
+    assert findings["seed"]["loss"] == 100.0 and findings["seed_over_best"] == 100.0
+    assert findings["truth"] is None and findings["free_run"] is None  # FakeTask assesses nothing
+    assert findings["molecules"] == []
