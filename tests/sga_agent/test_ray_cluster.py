@@ -86,6 +86,11 @@ class Cluster:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(pid, signal.SIGKILL)
             time.sleep(0.5)
+        # a later ray.init() without an address would try to join the cluster this names
+        for named in (self.folder / "ray_current_cluster", Path("/tmp/ray/ray_current_cluster")):
+            with contextlib.suppress(OSError):
+                if named.read_text().strip() == self.address:
+                    named.unlink()
 
 
 def children(pid: int) -> list[int]:
