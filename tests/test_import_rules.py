@@ -9,7 +9,9 @@ for code paths no test happens to run:
 - ``tasks`` imports of ``sga_agent`` only its protocol package, :mod:`sga_agent.task`
   (which imports nothing beyond the standard library);
 - the search core (:mod:`sga_agent.search`) imports no report module, and the report does not
-  import the search core.
+  import the search core;
+- ``taichi_mpm`` imports neither torch nor anything of ours; ``bridges`` imports neither
+  ``tasks`` nor ``sga_agent``.
 """
 
 from __future__ import annotations
@@ -96,6 +98,17 @@ def test_the_search_core_and_the_report_do_not_import_each_other():
     assert offences("sga_agent", forbidden) == []
 
 
+def test_the_simulator_and_the_bridges_stand_alone():
+    def simulator(module: str, importer: str) -> bool:
+        return any(within(module, p) for p in ("torch", "bridges", "tasks", "sga_agent"))
+
+    def bridge(module: str, importer: str) -> bool:
+        return any(within(module, p) for p in ("tasks", "sga_agent"))
+
+    assert offences("taichi_mpm", simulator) == []
+    assert offences("bridges", bridge) == []
+
+
 def test_the_protocol_package_imports_only_the_standard_library():
     """A task package imports it; it must not drag the agent (litellm, rich) along."""
     import sys
@@ -108,7 +121,7 @@ def test_the_protocol_package_imports_only_the_standard_library():
         assert {module.split(".")[0] for module in outside} <= set(sys.stdlib_module_names), path
 
 
-@pytest.mark.parametrize("package", ["sga_agent", "tasks"])
+@pytest.mark.parametrize("package", ["sga_agent", "tasks", "taichi_mpm", "bridges"])
 def test_the_check_reads_every_file(package):
     """A check that reads no file passes vacuously: make sure it reads some."""
     assert len(sources(package)) > 10
