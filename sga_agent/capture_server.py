@@ -49,9 +49,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     answers = start_helper()
     task = registry.resolve_task(args[0])
-    for name in (*PRELOADED, *getattr(task, "capture_modules", ())):
+    for name in (*PRELOADED, *task.capture_modules):
         importlib.import_module(name)
-    warm_up = getattr(task, "warm_up_solutions", lambda: [task.seed_solution()])()
+    warm_up = task.warm_up_solutions()
     outcomes = [sorted(capture_outcome(task, solution)) for solution in warm_up]
     answer(answers, {"ready": True, "warm_up": outcomes})
     for line in sys.stdin:

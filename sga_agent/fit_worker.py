@@ -81,11 +81,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def warm_up(task: Task, options: dict[str, Any]) -> Iterator[None] | None:
     """The stages of the task's own ``warm_up_fit`` still to run (None: all done or none)."""
-    warm = getattr(task, "warm_up_fit", None)
-    if not callable(warm):
-        return None
     try:
-        stages = warm(options)
+        stages = task.warm_up_fit(options)
     except Exception as error:  # the first evaluation meets and reports what is wrong
         _warm_up_failed(error)
         return None

@@ -93,7 +93,8 @@ def check_task(
         _collect(problems, "evaluate", lambda: _evaluation(full, data, settings))
     _collect(problems, "builtin_proposer", lambda: _builtin(full))
     if problems:
-        raise ContractError(f"task {getattr(task, 'name', '?')!r}:\n- " + "\n- ".join(problems))
+        name = task.name if hasattr(task, "name") else "?"
+        raise ContractError(f"task {name!r}:\n- " + "\n- ".join(problems))
 
 
 def _collect(problems: list[str], where: str, check: Callable[[], Any]) -> Any:
