@@ -48,7 +48,10 @@ class Cluster:
     def __init__(self, folder: Path) -> None:
         self.folder = folder
         self.port = free_port()
-        self.env = {**os.environ, "RAY_AUTH_MODE": "disabled"}
+        # the nodes' workers import the test-double task from this repository
+        path = [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+        self.env = {**os.environ, "RAY_AUTH_MODE": "disabled",
+                    "PYTHONPATH": os.pathsep.join(path)}  # fmt: skip
         common = ["--num-cpus=1", "--disable-usage-stats"]
         self._start(["--head", f"--node-ip-address={HEAD}", f"--port={self.port}",
                      "--include-dashboard=false", f"--temp-dir={folder}", *common])  # fmt: skip
@@ -150,8 +153,7 @@ def test_losing_a_node_mid_search_loses_nothing_and_records_nothing_twice(tmp_pa
         raylet = cluster.second_raylet()
         program = ("from tests.sga_agent.test_ray_cluster import lose_the_second_node; "
                    f"lose_the_second_node({str(tmp_path)!r}, {cluster.address!r}, {raylet})")
-        environment = {**cluster.env, "PYTHONPATH": str(REPO_ROOT)}
-        run = subprocess.run([sys.executable, "-c", program], cwd=REPO_ROOT, env=environment,
+        run = subprocess.run([sys.executable, "-c", program], cwd=REPO_ROOT, env=cluster.env,
                              capture_output=True, text=True, timeout=420)  # fmt: skip
     finally:
         cluster.stop()
