@@ -20,7 +20,9 @@ other outcome. One failure is not an
 outcome of the candidate: when the Ray node of the search's own machine stops (the cluster was
 shut down, or its head node died), every later evaluation would fail too, so the futures raise
 :class:`RayClusterLostError` instead; the search stops, leaves these candidates unrecorded, and
-``sga-agent resume`` evaluates them once a cluster is back.
+``sga-agent resume`` evaluates them once a cluster is back. Slots whose processes outlive
+their raylet may answer first, or finish the search: what they answer is recorded once, like
+any other evaluation.
 
 The search must run on a node of the cluster (usually the head), as every Ray driver does. Ray's
 own messages about lost workers and nodes go to its log files, not to the search's screen. Ray
