@@ -30,6 +30,7 @@ spinning on one core (``python -c "while True: pass"``), and prints each one's s
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -45,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 from make_ground_truth import TWICE_OFF, truth_code  # noqa: E402
 
-from sga_agent.sandbox import threads_per_worker  # noqa: E402
+from sga_agent.sandbox import resident_mb, threads_per_worker  # noqa: E402
 
 ORIGINAL_DRIVER = Path(__file__).resolve().parent / "original_sga.py"
 ORIGINAL_TASKS = ("elastic", "plasticine")  # what the original's driver runs
@@ -177,13 +178,9 @@ def where_the_time_goes(profiler, seconds: float, epochs: int, rows: int = 25) -
 
 def _resident_mb() -> float:
     """Current resident memory (Linux /proc; the peak so far elsewhere)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as status:
-            for line in status:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024
-    except OSError:
-        pass
+    current = resident_mb()
+    if current is not None:
+        return current
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
@@ -206,6 +203,7 @@ def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
     return {"epoch_s": row["epoch_seconds"], "peak_mb": row["peak_mb"], "row": row}
 
 
+@functools.cache
 def fit_threads(tree: Path, threads: int) -> dict[str, str]:
     """The thread settings that checkout ``tree``'s sandbox gives a fit worker with ``threads``
     threads (its own ``worker_environment``), so each commit runs as its evaluate would."""

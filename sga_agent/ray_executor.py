@@ -149,8 +149,7 @@ class RayPool:
         self._lock = threading.Lock()
         self._free: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._slots: list[Any] = []  # every actor started, live or starting
-        self._starting = 0  # replacements not ready yet
-        self._replacements: set[Any] = set()  # their actors, placed or waiting for a node
+        self._replacements: set[Any] = set()  # actors started for dead slots, not ready yet
         self._warm: set[tuple[str, str]] = set()  # (task, options) the slots were warmed for
         self._closed = False
         for _ in range(self._slot_count()):
@@ -261,34 +260,29 @@ class RayPool:
                 return self._free.get(timeout=1.0)
             except queue.Empty:
                 with self._lock:
-                    if self._closed or (not self._slots and not self._starting):
+                    if self._closed or (not self._slots and not self._replacements):
                         return None
 
     def _replace(self, dead: Any) -> None:
-        """Forget a dead slot and start another in the background; it joins the free slots
-        once Ray has placed it and it answers (never, if the cluster has no room left)."""
+        """Forget a dead slot and start another; it joins the free slots once Ray has placed
+        it and it answers (never, if the cluster has no room left)."""
         with self._lock:
             if dead in self._slots:
                 self._slots.remove(dead)
             if self._closed:
                 return
-            self._starting += 1
-            warm = set(self._warm)
-        threading.Thread(target=self._start_replacement, args=(warm,), daemon=True).start()
-
-    def _start_replacement(self, warm: set[tuple[str, str]]) -> None:
-        with self._lock:
-            if self._closed:
-                self._starting -= 1
-                return
             actor = self._actor_class.remote(self.limits, self.extra_python_path)
             self._replacements.add(actor)
+            warm = set(self._warm)
+        threading.Thread(target=self._await_replacement, args=(actor, warm), daemon=True).start()
+
+    def _await_replacement(self, actor: Any, warm: set[tuple[str, str]]) -> None:
+        """Wait for a replacement slot to answer, then warm it and free it (or give it up)."""
         try:
             ready, _ = self._ray.wait([actor.node.remote()], timeout=REPLACEMENT_TIMEOUT_S)
         except Exception:  # the cluster went away meanwhile
             ready = []
         with self._lock:
-            self._starting -= 1
             self._replacements.discard(actor)
             if not ready or self._closed:
                 with contextlib.suppress(Exception):  # Ray may be shut down already

@@ -288,15 +288,8 @@ class _LineProcess:
         return True
 
     def rss_mb(self) -> float | None:
-        """Its resident memory in MB (``VmRSS`` of /proc), None where it cannot be read."""
-        try:
-            with open(f"/proc/{self.process.pid}/status") as status:
-                for line in status:
-                    if line.startswith("VmRSS:"):
-                        return int(line.split()[1]) / 1024
-        except (OSError, ValueError, IndexError):
-            pass
-        return None
+        """Its resident memory in MB (:func:`resident_mb`)."""
+        return resident_mb(self.process.pid)
 
     @property
     def alive(self) -> bool:
@@ -1070,6 +1063,19 @@ class SandboxPool:
         finally:
             for evaluator in idle:
                 self._slots.put(evaluator)
+
+
+def resident_mb(pid: int | str = "self") -> float | None:
+    """Resident memory of process ``pid`` in MB (``VmRSS`` of /proc), None where it cannot be
+    read (the process has gone, or there is no /proc)."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 def threads_per_worker(workers: int) -> int:

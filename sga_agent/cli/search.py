@@ -216,6 +216,7 @@ def execute(
             result = runner.run(config, store, progress, proposer)
     except RayUnavailableError as error:  # no cluster: stop
         if new_run and not store.recorded().evaluations:  # it never started
+            store.unlock()
             shutil.rmtree(store.path, ignore_errors=True)
             raise click.ClickException(f"{error}\nno run was started") from error
         raise click.ClickException(f"{error}\n{resume}") from error
