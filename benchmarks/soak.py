@@ -15,8 +15,13 @@ after the first 50 evaluations and at the end with their ratio, the evaluations 
 the first and last hundred, and every ``out_of_memory`` or ``crashed`` verdict evaluated again
 alone, in a fresh process (:func:`sga_agent.sandbox.evaluate_in_sandbox`), with both verdicts.
 
-It runs outside CI (450 evaluations took 9 minutes on two busy cores, so 1,000 take about
-20). Usage::
+The search's candidates grow over a long run (the genetic programming's trees get larger),
+so the later ones cost more to capture and fit; the rate of the search alone cannot tell
+that from helpers that slow down. So after the search, the same helpers evaluate the first
+hundred candidates again, in the same batches, and it prints both rates and both sums of
+the evaluations' own seconds for those hundred, and whether each kept its verdict.
+
+It runs outside CI (see ``docs/benchmarks.md`` for the last run's numbers). Usage::
 
     python benchmarks/soak.py [--evaluations 1000] [--task elastic] [--steps 100]
         [--epochs 1] [--workers 2] [--interval 10] [--seed 0] [--out DIR]
@@ -49,6 +54,8 @@ class Recorder:
     finished: list[float] = field(default_factory=list)  # seconds since start, in order
     samples: list[tuple[float, int, str, int, float, float]] = field(default_factory=list)
     verdicts: dict[str, str] = field(default_factory=dict)  # candidate -> status
+    seconds: dict[str, float] = field(default_factory=dict)  # candidate -> its evaluation's
+    order: list[str] = field(default_factory=list)  # candidates, as they finished
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def on_event(self, event: dict) -> None:
@@ -60,6 +67,8 @@ class Recorder:
         with self.lock:
             self.finished.append(time.monotonic() - self.started)
             self.verdicts[event["candidate"]] = evaluation.get("status", "")
+            self.seconds[event["candidate"]] = float(evaluation.get("seconds", 0.0))
+            self.order.append(event["candidate"])
 
     def sample(self) -> None:
         now = time.monotonic() - self.started
@@ -79,6 +88,19 @@ class Recorder:
         for (name, seconds), (done, rss) in sorted(largest.items()):
             series.setdefault(name, []).append((seconds, done, rss))
         return series
+
+
+@dataclass
+class Again:
+    """The first evaluations run again at the end: their summed evaluation seconds then and
+    now, the rerun's finishing times (seconds from its start), and how many kept their
+    verdict."""
+
+    first_seconds: float
+    seconds: float = 0.0
+    finished: list[float] = field(default_factory=list)
+    count: int = 0
+    same_verdict: int = 0
 
 
 def helpers(parent: int) -> list[tuple[str, int, float, float]]:
@@ -112,6 +134,8 @@ def run_search(args: argparse.Namespace, out: Path, recorder: Recorder):
     from sga_agent import registry, runner
     from sga_agent.config import SearchConfig
     from sga_agent.run_store import RunStore
+    from sga_agent.search import Search
+    from sga_agent.task import configured
 
     per_iteration = args.exploit + args.explore
     config = SearchConfig(
@@ -124,8 +148,42 @@ def run_search(args: argparse.Namespace, out: Path, recorder: Recorder):
     proposer = runner.make_proposer(config, task)
     config = runner.with_preferred_options(config, proposer)
     store = RunStore.create(out, config, {"proposer": "builtin", "soak": True})
-    result = runner.run(config, store, recorder.on_event, proposer)
-    return config, store, result
+    task = configured(task, config.task_options)
+    with runner.make_pool(config) as pool:
+        store.append(runner.pool_record(pool))
+        search = Search(config, task, proposer, pool, store, recorder.on_event)
+        search.run()
+        again = first_again(search, store, recorder)
+    return config, store, again
+
+
+def first_again(search, store, recorder: Recorder) -> Again:
+    """The first RATE_WINDOW evaluations run again on the same, aged helpers, in the same
+    batches (one iteration's candidates submitted together, as the search does): the like-
+    for-like check of the helpers' health, since the search's own candidates grow (and so
+    cost more) over a long run."""
+    first = [c for c in recorder.order[:RATE_WINDOW] if c in recorder.seconds]
+    batches: dict[str, list[str]] = {}
+    for candidate in first:
+        batches.setdefault(candidate.split("-", 1)[0], []).append(candidate)
+    again = Again(first_seconds=sum(recorder.seconds[c] for c in first))
+    started = time.monotonic()
+    for batch in batches.values():
+        futures = {
+            candidate: search.evaluator.submit(
+                search.config.task,
+                (store.candidate_dir(candidate) / "code.py").read_text(encoding="utf-8"),
+                search.settings,
+            )
+            for candidate in batch
+        }
+        for candidate, future in futures.items():
+            evaluation = future.result()
+            again.seconds += evaluation.seconds
+            again.same_verdict += evaluation.status == recorder.verdicts[candidate]
+            again.count += 1
+            again.finished.append(time.monotonic() - started)
+    return again
 
 
 def sampling(recorder: Recorder, interval: float, stop: threading.Event) -> None:
@@ -250,6 +308,29 @@ def report(recorder: Recorder, checked: list[tuple[str, str, str, str]], out: Pa
     print(f"written: {out / 'samples.csv'}, {out / 'rate.csv'}, {out / 'soak.png'}")
 
 
+def report_again(recorder: Recorder, again: Again, store) -> None:
+    """The like-for-like check: the first evaluations at the start and again at the end."""
+    count = again.count
+    if count < 2:
+        return
+    first = recorder.finished[:count]
+    then = 60 * (count - 1) / max(first[-1] - first[0], 1e-9)
+    now = 60 * (count - 1) / max(again.finished[-1] - again.finished[0], 1e-9)
+    print(f"the first {count} evaluations again, on the same helpers after all the others:")
+    print(f"  evaluations per minute (first to last finish): {then:.2f} at the start, "
+          f"{now:.2f} at the end ({100 * (now / then - 1):+.1f} %)")  # fmt: skip
+    change = 100 * (again.seconds / again.first_seconds - 1)
+    print(f"  their evaluations' own seconds, summed: {again.first_seconds:.1f} at the start, "
+          f"{again.seconds:.1f} at the end ({change:+.1f} %)")  # fmt: skip
+    print(f"  the same verdict: {again.same_verdict} of {count}")
+    sizes = [len((store.candidate_dir(c) / "code.py").read_text(encoding="utf-8"))
+             for c in recorder.order]  # fmt: skip
+    window = min(RATE_WINDOW, len(sizes))
+    first_size, last_size = sum(sizes[:window]) / window, sum(sizes[-window:]) / window
+    print(f"the search's candidates' code, mean characters: first {window} {first_size:.0f}, "
+          f"last {window} {last_size:.0f}")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--evaluations", type=int, default=1000)
@@ -271,13 +352,14 @@ def main() -> None:
     sampler = threading.Thread(target=sampling, args=(recorder, args.interval, stop), daemon=True)
     sampler.start()
     try:
-        config, store, _ = run_search(args, args.out, recorder)
+        config, store, again = run_search(args, args.out, recorder)
     finally:
         stop.set()
         sampler.join()
         write_outputs(args.out, recorder)
     (args.out / "run.json").write_text(json.dumps({"run": str(store.path)}))
     report(recorder, recheck(config, store, recorder), args.out)
+    report_again(recorder, again, store)
 
 
 if __name__ == "__main__":
