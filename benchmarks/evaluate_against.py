@@ -44,11 +44,14 @@ def run_once(tree: Path, args: argparse.Namespace) -> tuple[float, dict]:
 
 POOL_PROGRAM = """
 import sys, time
+from sga_agent.options import parse_options
+from sga_agent.registry import load_task
 from sga_agent.sandbox import SandboxLimits, SandboxPool
 from sga_agent.task import EvaluationSettings
 task, law, epochs, count = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-options = sys.argv[5:]
-settings = EvaluationSettings(epochs=epochs, options=dict(o.split("=", 1) for o in options))
+raw = dict(option.split("=", 1) for option in sys.argv[5:])
+options = parse_options(load_task(task).options_type, raw, task)  # as the checkout reads them
+settings = EvaluationSettings(epochs=epochs, options=options)
 code = open(law).read()
 start = time.perf_counter()
 with SandboxPool(1, SandboxLimits()) as pool:

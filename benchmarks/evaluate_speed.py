@@ -70,15 +70,18 @@ def capture(task: str, folder: Path) -> Path:
     return path
 
 
-def run_one(task: str, epochs: int, profile: bool, graph: Path, options: dict) -> dict:
-    """Evaluate in this process (called in a child); returns the measurements."""
+def run_one(task: str, epochs: int, profile: bool, graph: Path, raw: dict[str, str]) -> dict:
+    """Evaluate in this process (called in a child) with the task options ``raw`` (texts);
+    returns the measurements."""
     import torch
 
+    from sga_agent.options import parse_options
     from sga_agent.registry import load_task
     from sga_agent.task import EvaluationSettings
 
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
     evaluator = load_task(task)
+    options = parse_options(evaluator.options_type, raw, task)
     from tasks.constitutive.evaluation import ensure_runtime
 
     ensure_runtime("float32")
@@ -294,8 +297,8 @@ def main() -> None:
     parser.add_argument("--graph", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        options = {} if args.graph_memory_mb is None else {"graph_memory_mb": args.graph_memory_mb}
-        print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph, options)))
+        raw = {} if args.graph_memory_mb is None else {"graph_memory_mb": str(args.graph_memory_mb)}
+        print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph, raw)))
         return
     if args.original:
         if set(args.tasks) - set(ORIGINAL_TASKS):

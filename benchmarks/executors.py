@@ -26,7 +26,6 @@ local pool and on Ray alternately, and checks that every candidate's outcome is 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import statistics
@@ -38,12 +37,19 @@ from pathlib import Path
 from typing import Any
 
 from sga_agent import registry, runner
-from sga_agent.cli.options import key_value_options, typed_task_options
+from sga_agent.cli.options import key_value_options
 from sga_agent.config import PRESETS, SearchConfig
 from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import SandboxLimits, SandboxPool
-from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, PromptParts
+from sga_agent.task import (
+    Evaluation,
+    EvaluationSettings,
+    InvalidSolution,
+    PromptParts,
+    TaskBase,
+    configured,
+)
 
 HERE = Path(__file__).resolve().parent
 BUSY_TASK = "executors:BusyTask"
@@ -109,11 +115,14 @@ def measure(
     return {"start-up s": start_up, "seconds": seconds, "per minute": 60 * len(solutions) / seconds}
 
 
-def search_seconds(config: SearchConfig, folder: Path) -> tuple[float, dict[str, dict]]:
-    """Wall time of one whole search (pool start-up included) and its candidates' outcomes."""
+def search_seconds(
+    config: SearchConfig, task: TaskBase, folder: Path
+) -> tuple[float, dict[str, dict]]:
+    """Wall time of one whole search of ``task`` (set up for the config's options; pool
+    start-up included) and its candidates' outcomes."""
     started = time.perf_counter()
     store = RunStore.create(folder, config, {})
-    runner.run(config, store)
+    runner.run(config, store, task=task)
     seconds = time.perf_counter() - started
     outcomes = {}
     for candidate in sorted((store.path / "candidates").iterdir()):
@@ -122,27 +131,30 @@ def search_seconds(config: SearchConfig, folder: Path) -> tuple[float, dict[str,
     return seconds, outcomes
 
 
-def compare_searches(args: argparse.Namespace, options: dict[str, Any]) -> None:
+def compare_searches(args: argparse.Namespace, raw: dict[str, str]) -> None:
     """Record a quick search of ``args.search``, then time its replays on both executors."""
     folder = Path(tempfile.mkdtemp(prefix="executors-search-"))
+    loaded = registry.load_task(args.search)
+    options = runner.task_options(loaded, raw, runner.BUILTIN)
+    task = configured(loaded, options)
     preset = {k: v for k, v in PRESETS["quick"].items() if k != "bilevel"}
-    base = SearchConfig(task=args.search, proposer=runner.BUILTIN, preset="quick",
-                        workers=args.workers, task_options=options, **preset)  # fmt: skip
-    base = runner.with_preferred_options(base, runner.make_proposer(base, registry.load_task(
-        args.search)))  # fmt: skip
+    base = SearchConfig.from_settings(
+        task=args.search, proposer=runner.BUILTIN, preset="quick", workers=args.workers,
+        task_options=options, **preset,
+    )  # fmt: skip
     print(f"recording a quick search of {args.search} (untimed) ...", flush=True)
-    _, recorded = search_seconds(base, folder / "recorded")
+    _, recorded = search_seconds(base, task, folder / "recorded")
     (recorded_path,) = (folder / "recorded").iterdir()
-    replay = dataclasses.replace(base, proposer=f"{runner.REPLAY_PREFIX}{recorded_path}")
+    replay = base.replace(proposer=f"{runner.REPLAY_PREFIX}{recorded_path}")
     configs = {
         "local": replay,
-        "ray": dataclasses.replace(replay, executor="ray", ray_address=args.ray_address),
+        "ray": replay.replace(executor="ray", ray_address=args.ray_address),
     }
     seconds: dict[str, list[float]] = {name: [] for name in configs}
     load_before = os.getloadavg()
     for repeat in range(args.repeats):
         for name in sorted(configs, reverse=repeat % 2 == 1):
-            took, outcomes = search_seconds(configs[name], folder / f"{name}-{repeat}")
+            took, outcomes = search_seconds(configs[name], task, folder / f"{name}-{repeat}")
             if outcomes != recorded:
                 raise RuntimeError(f"the {name} replay's outcomes differ from the recorded run")
             seconds[name].append(took)
@@ -171,14 +183,15 @@ def main() -> None:
     parser.add_argument("--search", metavar="TASK", help="time whole searches of TASK instead")
     args = parser.parse_args()
 
-    named = args.search or args.task
     raw = key_value_options(args.option)
-    options = typed_task_options(registry.load_task(named), raw) if named else {}
     if args.search:
-        compare_searches(args, options)
+        compare_searches(args, raw)
         return
+    options = None
     if args.task:
-        task, seed = args.task, registry.load_task(args.task).seed_solution()
+        loaded = registry.load_task(args.task)
+        task, seed = args.task, loaded.seed_solution()
+        options = runner.task_options(loaded, raw, "")
     else:
         task, seed = BUSY_TASK, str(args.work)
     settings = EvaluationSettings(epochs=args.epochs, options=options)

@@ -137,18 +137,18 @@ def run_search(args: argparse.Namespace, out: Path, recorder: Recorder):
     from sga_agent.search import Search
     from sga_agent.task import configured
 
+    loaded = registry.load_task(args.task)
+    options = runner.task_options(loaded, {"steps": str(args.steps)}, runner.BUILTIN)
     per_iteration = args.exploit + args.explore
-    config = SearchConfig(
-        task=args.task, proposer="builtin", preset="quick", top_k=5, exploit=args.exploit,
+    config = SearchConfig.from_settings(
+        task=args.task, proposer=runner.BUILTIN, preset="quick", top_k=5, exploit=args.exploit,
         explore=args.explore, iterations=max(1, 2 * math.ceil(args.evaluations / per_iteration)),
-        epochs=args.epochs, task_options={"steps": args.steps}, workers=args.workers,
+        epochs=args.epochs, task_options=options, workers=args.workers,
         max_evaluations=args.evaluations, seed=args.seed,
     )  # fmt: skip
-    task = registry.load_task(config.task)
+    task = configured(loaded, options)
     proposer = runner.make_proposer(config, task)
-    config = runner.with_preferred_options(config, proposer)
     store = RunStore.create(out, config, {"proposer": "builtin", "soak": True})
-    task = configured(task, config.task_options)
     with runner.make_pool(config) as pool:
         store.append(runner.pool_record(pool))
         search = Search(config, task, proposer, pool, store, recorder.on_event)
@@ -226,16 +226,10 @@ def window_rate(finished: list[float], first: bool) -> float:
 def recheck(config, store, recorder: Recorder) -> list[tuple[str, str, str, str]]:
     """(candidate, search verdict, alone verdict, alone reason) of every out_of_memory or
     crashed candidate, evaluated again alone in fresh processes."""
-    from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
-    from sga_agent.task import EvaluationSettings
+    from sga_agent.sandbox import evaluate_in_sandbox
 
-    settings = EvaluationSettings(
-        epochs=config.epochs if config.bilevel else 0,
-        learning_rate=config.learning_rate,
-        seed=config.seed,
-        options=dict(config.task_options),
-    )  # as the search's
-    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb)
+    settings = config.evaluation_settings()  # as the search's
+    limits = config.sandbox.limits(threads=1)
     checked = []
     for candidate, status in sorted(recorder.verdicts.items()):
         if status not in ("out_of_memory", "crashed"):

@@ -23,6 +23,7 @@ import torch
 
 from sga_agent.registry import load_task
 from sga_agent.task import Evaluation, EvaluationSettings, InvalidSolution, Task
+from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import SPECS
 
 LAWS = Path(__file__).resolve().parent.parent / "examples" / "laws"
@@ -78,7 +79,7 @@ def main() -> None:
     parser.add_argument("--fit", action="store_true", help="fit the truth started 2x off")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    options = {} if args.steps is None else {"steps": args.steps}
+    options = ConstitutiveOptions(steps=args.steps)
     settings = EvaluationSettings(epochs=0, options=options)
     print(f"{'task':<11} {'seed loss':>11} {'truth loss':>11} {'ratio':>9} {'seconds':>8}")
     for name in args.tasks:

@@ -1,7 +1,15 @@
 """Settings of one search run, and the presets that reproduce the paper's Table 1 columns.
 
-A run is fully described by a :class:`SearchConfig`; it is written to the run folder, so
+A run is described by a :class:`SearchConfig`: the task with its typed options, the proposer,
+and one config per component, as OpenEvolve and ShinkaEvolve give each of theirs: the outer
+loop (:class:`LoopConfig`), the inner fit (:class:`FitConfig`), the sandbox
+(:class:`SandboxConfig`), the executor (:class:`ExecutorConfig`) and the budgets
+(:class:`Budgets`). It is written to the run folder (:meth:`SearchConfig.to_dict`), so
 ``sga-agent resume`` continues with exactly the same settings.
+
+Each setting also has a flat name (:data:`SETTINGS`): the command line's, that of the
+benchmarks' ``--set``, and its key in the ``config.json`` of runs written before the components
+existed, which :func:`current_format` reads.
 """
 
 from __future__ import annotations
@@ -11,10 +19,16 @@ import difflib
 import math
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from sga_agent.options import OptionError, options_data, options_from_data
 from sga_agent.sandbox import SandboxLimits
+from sga_agent.task import EvaluationSettings, NoOptions
+
+if TYPE_CHECKING:
+    from sga_agent.search import Totals
 
 #: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off. All but
 #: "quick" are the columns of the paper's Table 1; "quick" is the default of the LLM-free
@@ -32,110 +46,136 @@ PRESETS: dict[str, dict[str, Any]] = {
     "opro": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": False},
 }
 
-
 #: Where candidates are evaluated: this machine's process pool, or a Ray cluster.
 EXECUTORS = ("local", "ray")
 #: A Ray head node's GCS address, HOST:PORT (the port ``ray start --head`` printed).
 _RAY_ADDRESS = re.compile(r"^[A-Za-z0-9._-]+:\d{1,5}$")
+#: The version of :meth:`SearchConfig.to_dict`'s layout (runs without one are flat).
+FORMAT = 2
 
 
 class ConfigError(ValueError):
     """A search setting is invalid; the message names it and the fix."""
 
 
+def _at_least(config: Any, names: tuple[str, ...], minimum: int, wording: str) -> None:
+    for name in names:
+        value = getattr(config, name)
+        if value < minimum:
+            raise ConfigError(f"{name} must be {wording}, got {value}")
+
+
 @dataclass(frozen=True)
-class SearchConfig:
-    """Everything that determines a search run.
+class LoopConfig:
+    """The outer loop (Algorithm 1 of the paper).
 
     Parameters
     ----------
-    task : str
-        Registered task name (``sga-agent tasks``).
-    proposer : str
-        Who proposes: a litellm model string ("openai/gpt-4o"), or "replay:RUN_DIR".
-    api_base : str, optional
-        Base URL of an OpenAI-compatible server (local models).
     iterations, top_k, exploit, explore : int
         Outer iterations; solutions shown per prompt (K); offspring per iteration asked at the
         exploit (low) and explore (high) temperature (M_l, M_h).
     exploit_temperature, explore_temperature : float
         T_l and T_h (paper: 0.5 and 1.0).
-    bilevel : bool
-        Fit each candidate's continuous parameters (off: evaluate the defaults as proposed).
-    epochs, learning_rate : optional
-        Inner optimization overrides (default: the task's).
-    task_options : dict
-        Task-specific evaluation options (e.g. ``{"steps": 200}`` for a short scene).
-    workers : int
-        Candidates evaluated at once, each in its own sandboxed process (with the ``ray``
-        executor: the size of the local Ray instance started when no address is given).
-    timeout_s, memory_mb : limits of one evaluation.
-    executor : str
-        "local" (a pool of sandboxed processes on this machine) or "ray" (each evaluation a
-        Ray task running the same sandboxed worker on a node of a Ray cluster).
-    ray_address : str, optional
-        The Ray cluster: "HOST:PORT" of its head node, or "auto" (``RAY_ADDRESS``, else a
-        cluster started on this machine with ``ray start``); None starts a private local Ray
-        instance for the run.
-    ray_cpus_per_task, ray_memory_mb : optional
-        Ray resources each evaluation reserves: CPUs, and memory in MiB (None: none).
-    max_usd, max_tokens, max_evaluations : optional budgets; the run stops cleanly at them.
-    seed : int
-        Seed passed to the evaluations and the offline proposers.
     """
 
-    task: str
-    proposer: str
-    api_base: str | None = None
-    preset: str = "sga"
     iterations: int = 5
     top_k: int = 5
     exploit: int = 4
     explore: int = 12
     exploit_temperature: float = 0.5
     explore_temperature: float = 1.0
+
+    def __post_init__(self) -> None:
+        _at_least(self, ("iterations", "top_k"), 1, "at least 1")
+        _at_least(self, ("exploit", "explore"), 0, ">= 0")
+        if self.offspring < 1:
+            raise ConfigError("exploit + explore must be at least 1 (offspring per iteration)")
+        for name in ("exploit_temperature", "explore_temperature"):
+            if not 0 <= getattr(self, name) <= 2:
+                raise ConfigError(f"{name} must lie in [0, 2], got {getattr(self, name)}")
+
+    @property
+    def offspring(self) -> int:
+        """Candidates proposed per iteration."""
+        return self.exploit + self.explore
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """The inner loop: how each candidate's continuous parameters are fitted.
+
+    Parameters
+    ----------
+    bilevel : bool
+        Fit them (off: evaluate the defaults as proposed).
+    epochs, learning_rate : optional
+        Inner-optimization overrides (default: the task's).
+    """
+
     bilevel: bool = True
     epochs: int | None = None
     learning_rate: float | None = None
-    task_options: dict[str, Any] = field(default_factory=dict)
-    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+
+    def __post_init__(self) -> None:
+        if self.epochs is not None and self.epochs < 0:
+            raise ConfigError(f"epochs must be >= 0, got {self.epochs}")
+        if self.learning_rate is not None and not self.learning_rate > 0:
+            raise ConfigError(f"learning_rate must be positive, got {self.learning_rate}")
+
+
+@dataclass(frozen=True)
+class SandboxConfig:
+    """Limits of one evaluation: wall clock ``timeout_s`` (seconds) and ``memory_mb`` (MiB),
+    as :class:`~sga_agent.sandbox.SandboxLimits` applies them."""
+
     timeout_s: float = SandboxLimits.timeout_s
     memory_mb: int = SandboxLimits.memory_mb
-    max_usd: float | None = None
-    max_tokens: int | None = None
-    max_evaluations: int | None = None
-    seed: int = 0
-    executor: str = "local"
+
+    def __post_init__(self) -> None:
+        try:
+            self.limits(threads=1)
+        except (TypeError, ValueError) as error:
+            raise ConfigError(str(error)) from None
+
+    def limits(self, threads: int) -> SandboxLimits:
+        """The sandbox's limits, with ``threads`` for each fit's parallel loops."""
+        return SandboxLimits(timeout_s=self.timeout_s, memory_mb=self.memory_mb, threads=threads)
+
+
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """Where candidates are evaluated.
+
+    Parameters
+    ----------
+    kind : str
+        "local" (a pool of sandboxed processes on this machine) or "ray" (each evaluation a
+        Ray task running the same sandboxed worker on a node of a Ray cluster); the setting
+        ``executor``.
+    workers : int
+        Candidates evaluated at once, each in its own sandboxed process (with Ray: the size of
+        the local Ray instance started when no address is given).
+    ray_address : str, optional
+        The Ray cluster: "HOST:PORT" of its head node, or "auto" (``RAY_ADDRESS``, else a
+        cluster started on this machine with ``ray start``); None starts a private local Ray
+        instance for the run.
+    ray_cpus_per_task, ray_memory_mb : optional
+        Ray resources each evaluation reserves: CPUs, and memory in MiB (None: none).
+    """
+
+    kind: str = "local"
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     ray_address: str | None = None
     ray_cpus_per_task: float = 1.0
     ray_memory_mb: int | None = None
 
     def __post_init__(self) -> None:
-        for name in ("iterations", "top_k", "workers"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("exploit", "explore"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.exploit + self.explore < 1:
-            raise ConfigError("exploit + explore must be at least 1 (offspring per iteration)")
-        for name in ("exploit_temperature", "explore_temperature"):
-            if not 0 <= getattr(self, name) <= 2:
-                raise ConfigError(f"{name} must lie in [0, 2], got {getattr(self, name)}")
-        for name in ("max_usd", "max_tokens", "max_evaluations"):
-            value = getattr(self, name)
-            if value is not None and value <= 0:
-                raise ConfigError(f"{name} must be positive, got {value}")
-        self._check_executor()
-
-    def _check_executor(self) -> None:
-        if self.executor not in EXECUTORS:
-            raise ConfigError(
-                f"executor must be one of {', '.join(EXECUTORS)}, got {self.executor!r}"
-            )
+        _at_least(self, ("workers",), 1, "at least 1")
+        if self.kind not in EXECUTORS:
+            raise ConfigError(f"executor must be one of {', '.join(EXECUTORS)}, got {self.kind!r}")
         defaults = {"ray_address": None, "ray_cpus_per_task": 1.0, "ray_memory_mb": None}
         given = [name for name, default in defaults.items() if getattr(self, name) != default]
-        if self.executor != "ray" and given:
+        if self.kind != "ray" and given:
             raise ConfigError(f"{', '.join(given)} only apply to executor 'ray' (--executor ray)")
         address = self.ray_address
         if address is not None and address != "auto" and not _RAY_ADDRESS.match(address):
@@ -154,9 +194,127 @@ class SearchConfig:
         ):
             raise ConfigError(f"ray_memory_mb must be a positive integer (MiB), got {memory!r}")
 
+
+@dataclass(frozen=True)
+class Budgets:
+    """Limits at which a run stops cleanly (None: none): ``max_usd`` spent on the model,
+    ``max_tokens`` it used, ``max_evaluations`` run. A budget is a field here and a line in
+    :meth:`spent_of`; the loop checks them all through :meth:`exceeded`."""
+
+    max_usd: float | None = None
+    max_tokens: int | None = None
+    max_evaluations: int | None = None
+
+    def __post_init__(self) -> None:
+        for name, limit in vars(self).items():
+            if limit is not None and limit <= 0:
+                raise ConfigError(f"{name} must be positive, got {limit}")
+
+    @staticmethod
+    def spent_of(totals: Totals) -> dict[str, float]:
+        """What each budget measures, in ``totals``."""
+        return {
+            "max_usd": totals.cost_usd,
+            "max_tokens": totals.tokens,
+            "max_evaluations": totals.evaluations,
+        }
+
+    def exceeded(self, totals: Totals) -> str:
+        """The first budget ``totals`` has reached, as "max_usd=5.0 reached"; "" if none."""
+        for name, spent in self.spent_of(totals).items():
+            limit = getattr(self, name)
+            if limit is not None and spent >= limit:
+                return f"{name}={limit} reached"
+        return ""
+
+
+#: The components of a run's config, by their field in :class:`SearchConfig`.
+COMPONENTS: dict[str, type] = {
+    "loop": LoopConfig, "fit": FitConfig, "sandbox": SandboxConfig, "executor": ExecutorConfig,
+    "budgets": Budgets,
+}  # fmt: skip
+#: Every component setting by its flat name: its component and its field there.
+SETTINGS: dict[str, tuple[str, str]] = {
+    ("executor" if (part, f.name) == ("executor", "kind") else f.name): (part, f.name)
+    for part, kind in COMPONENTS.items()
+    for f in dataclasses.fields(kind)
+}
+#: The settings of the run itself (not of a component).
+RUN_SETTINGS = ("task", "proposer", "task_options", "api_base", "preset", "seed")
+
+
+def setting_field(name: str) -> dataclasses.Field:
+    """The dataclass field that holds the setting ``name`` (a flat name, or a run setting)."""
+    if name in SETTINGS:
+        part, attribute = SETTINGS[name]
+        return next(f for f in dataclasses.fields(COMPONENTS[part]) if f.name == attribute)
+    return next(f for f in dataclasses.fields(SearchConfig) if f.name == name)
+
+
+def default(name: str) -> Any:
+    """The default of the setting ``name`` (the command line's defaults are the config's)."""
+    found = setting_field(name)
+    if found.default_factory is not dataclasses.MISSING:
+        return found.default_factory()
+    return found.default
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Everything that determines a search run.
+
+    Parameters
+    ----------
+    task : str
+        Registered task name (``sga-agent tasks``).
+    proposer : str
+        Who proposes: a litellm model string ("openai/gpt-4o"), "builtin", or
+        "replay:RUN_DIR".
+    task_options : object
+        The task's options: an object of its ``options_type``
+        (:func:`sga_agent.options.parse_options` reads one from ``KEY=VALUE`` text); the
+        default, :class:`~sga_agent.task.NoOptions`, fits only a task that declares none.
+    api_base : str, optional
+        Base URL of an OpenAI-compatible server (local models).
+    preset : str
+        The preset the settings started from (a record: its values are in the components).
+    seed : int
+        Seed passed to the evaluations and the offline proposers.
+    loop, fit, sandbox, executor, budgets
+        The components' configs.
+    """
+
+    task: str
+    proposer: str
+    task_options: Any = field(default_factory=NoOptions)
+    api_base: str | None = None
+    preset: str = "sga"
+    seed: int = 0
+    loop: LoopConfig = field(default_factory=LoopConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
+    sandbox: SandboxConfig = field(default_factory=SandboxConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    budgets: Budgets = field(default_factory=Budgets)
+
+    def __post_init__(self) -> None:
+        try:
+            options_data(self.task_options)
+        except TypeError as error:
+            raise ConfigError(str(error)) from None
+        for part, kind in COMPONENTS.items():
+            if not isinstance(getattr(self, part), kind):
+                raise ConfigError(f"{part} must be a {kind.__name__}, got {getattr(self, part)!r}")
+
+    @classmethod
+    def from_settings(cls, **settings: Any) -> SearchConfig:
+        """The config of ``settings`` by their flat names (:data:`SETTINGS` and the run's own,
+        :data:`RUN_SETTINGS`); the rest take their defaults."""
+        run, parts = _by_component(settings)
+        return cls(**run, **{part: COMPONENTS[part](**values) for part, values in parts.items()})
+
     @classmethod
     def from_preset(cls, preset: str, **settings: Any) -> SearchConfig:
-        """The preset's values, overridden by ``settings`` that are not None."""
+        """The preset's values, overridden by ``settings`` (flat names) that are not None."""
         if preset not in PRESETS:
             close = difflib.get_close_matches(preset, PRESETS, n=1)
             hint = f" Did you mean {close[0]!r}?" if close else ""
@@ -165,19 +323,105 @@ class SearchConfig:
             )
         values = {**PRESETS[preset], "preset": preset}
         values.update({key: value for key, value in settings.items() if value is not None})
-        return cls(**values)
+        return cls.from_settings(**values)
 
-    @property
-    def offspring(self) -> int:
-        return self.exploit + self.explore
+    def replace(self, **settings: Any) -> SearchConfig:
+        """This config with the settings given (by their flat names) changed."""
+        run, parts = _by_component(settings)
+        changed = {part: dataclasses.replace(getattr(self, part), **values)
+                   for part, values in parts.items()}  # fmt: skip
+        return dataclasses.replace(self, **run, **changed)
+
+    def evaluation_settings(self) -> EvaluationSettings:
+        """What each evaluation of the run is given."""
+        return EvaluationSettings(
+            epochs=self.fit.epochs if self.fit.bilevel else 0,
+            learning_rate=self.fit.learning_rate,
+            seed=self.seed,
+            options=self.task_options,
+        )
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The config as JSON data (the layout :data:`FORMAT`), the task options a dict."""
+        data: dict[str, Any] = {"format": FORMAT}
+        data.update({name: getattr(self, name) for name in RUN_SETTINGS})
+        data["task_options"] = options_data(self.task_options)
+        data.update({part: dataclasses.asdict(getattr(self, part)) for part in COMPONENTS})
+        return data
+
+    def settings(self) -> dict[str, Any]:
+        """Every setting by its flat name, the task options a dict."""
+        return flat_settings(self.to_dict())
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SearchConfig:
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
+    def from_dict(cls, data: Mapping[str, Any], options_type: type) -> SearchConfig:
+        """The config :meth:`to_dict` wrote, or that a run written before the components
+        recorded (flat); its task options built as an ``options_type`` object.
+
+        Raises
+        ------
+        ConfigError
+            A setting this version does not know, or a value it refuses.
+        """
+        record = current_format(data)
+        known = {"format", *RUN_SETTINGS, *COMPONENTS}
+        unknown = [f"{name}" for name in record if name not in known]
+        for part, kind in COMPONENTS.items():
+            names = {f.name for f in dataclasses.fields(kind)}
+            unknown += [f"{part}.{name}" for name in record.get(part, {}) if name not in names]
         if unknown:
             raise ConfigError(f"unknown settings in the run config: {', '.join(sorted(unknown))}")
-        return cls(**data)
+        try:
+            options = options_from_data(options_type, record.get("task_options") or {},
+                                        str(record.get("task")))  # fmt: skip
+        except OptionError as error:
+            raise ConfigError(f"the run's task options: {error}") from None
+        run = {name: record[name] for name in RUN_SETTINGS if name in record}
+        parts = {part: kind(**record.get(part, {})) for part, kind in COMPONENTS.items()}
+        return cls(**{**run, "task_options": options}, **parts)
+
+
+def _by_component(settings: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, dict]]:
+    """``settings`` (flat names) split into the run's own and each component's."""
+    run: dict[str, Any] = {}
+    parts: dict[str, dict[str, Any]] = {}
+    for name, value in settings.items():
+        if name in RUN_SETTINGS:
+            run[name] = value
+        elif name in SETTINGS:
+            part, attribute = SETTINGS[name]
+            parts.setdefault(part, {})[attribute] = value
+        else:
+            names = [*RUN_SETTINGS, *SETTINGS]
+            close = difflib.get_close_matches(name, names, n=1)
+            hint = f" Did you mean {close[0]!r}?" if close else ""
+            raise ConfigError(f"no search setting {name!r} (known: {', '.join(names)}).{hint}")
+    return run, parts
+
+
+def current_format(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's config record in the current layout: itself, or, for a run written before the
+    components existed (flat: every setting by its flat name), its settings put into their
+    components. Names it does not know stay where they are (:meth:`SearchConfig.from_dict`
+    refuses them, a report shows them)."""
+    if "format" in data:
+        return dict(data)
+    record: dict[str, Any] = {"format": FORMAT}
+    for name, value in data.items():
+        if name in SETTINGS:
+            part, attribute = SETTINGS[name]
+            record.setdefault(part, {})[attribute] = value
+        else:
+            record[name] = value
+    return record
+
+
+def flat_settings(record: Mapping[str, Any]) -> dict[str, Any]:
+    """Every setting a config record (current layout) holds, by its flat name."""
+    flat = {name: value for name, value in record.items()
+            if name not in COMPONENTS and name != "format"}  # fmt: skip
+    for name, (part, attribute) in SETTINGS.items():
+        values = record.get(part)
+        if isinstance(values, Mapping) and attribute in values:
+            flat[name] = values[attribute]
+    return flat

@@ -1,24 +1,27 @@
-"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS [STAGES]]``,
+"""The trusted fit worker: ``python -m sga_agent.fit_worker TASK MEMORY_MB OPTIONS [STAGES]``,
 run by .sandbox.
 
-It scores captured solutions: one request per line of its standard input::
+OPTIONS is the JSON text of the task options of every evaluation it makes
+(:class:`~sga_agent.helper_protocol.FitSettings`); it builds the task's options object from
+it once. It scores captured solutions: one request per line of its standard input::
 
-    {"data": <what the task's capture returned>, "settings": {EvaluationSettings fields}}
+    {"data": <what the task's capture returned>,
+     "settings": {"epochs": ..., "learning_rate": ..., "seed": ...}}
 
 and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
 It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
 ``evaluate`` checks before it uses it. So what it reports can be believed, and it stays warm
 (torch, Taichi, kernels and ground truth loaded) from one candidate to the next.
 
-Once it has said it is ready it runs the task's ``warm_up_fit(OPTIONS)`` if the task has one
-(OPTIONS: the JSON task options of its evaluations), so that candidates do not pay for loading
-and compiling. A warm-up that returns an iterator comes in stages, the ones every evaluation
-needs first: a stage starts only while no request waits, so a waiting candidate goes before
-the remaining stages, which run whenever the worker next waits for a request, and those not
-reached when the input ends are skipped. STAGES, if given, is the most stages it runs ahead
-of requests (a worker for a single candidate needs the first only). The request
-``{"warm": true}`` runs every stage left and answers ``{"warm": true}``: a slot sends it to the
-replacement it starts for a worker it recycles, and hands it candidates once it has answered.
+Once it has said it is ready it runs the task's ``warm_up_fit`` with those options, so that
+candidates do not pay for loading and compiling. A warm-up that returns an iterator comes in
+stages, the ones every evaluation needs first: a stage starts only while no request waits, so
+a waiting candidate goes before the remaining stages, which run whenever the worker next waits
+for a request, and those not reached when the input ends are skipped. STAGES, if given, is
+the most stages it runs ahead of requests (a worker for a single candidate needs the first
+only). The request ``{"warm": true}`` runs every stage left and answers ``{"warm": true}``: a
+slot sends it to the replacement it starts for a worker it recycles, and hands it candidates
+once it has answered.
 
 Its writable private memory is limited (``RLIMIT_DATA``, MEMORY_MB MiB; see :mod:`.sandbox`). A
 failure to allocate becomes an ``out_of_memory`` Evaluation, after which the worker exits so
@@ -39,30 +42,27 @@ from typing import IO, Any
 
 from sga_agent import registry
 from sga_agent.helper_protocol import answer, describe, start_helper
-from sga_agent.task import Evaluation, EvaluationSettings, Task, is_out_of_memory
+from sga_agent.options import options_from_data
+from sga_agent.task import Evaluation, EvaluationSettings, Task, TaskBase, is_out_of_memory
 
 TRACEBACK_TAIL_CHARS = 4000
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if len(args) not in (2, 3, 4):
-        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB [OPTIONS [STAGES]]",
+    if len(args) not in (3, 4):
+        print("usage: python -m sga_agent.fit_worker TASK MEMORY_MB OPTIONS [STAGES]",
               file=sys.stderr)  # fmt: skip
         return 2
     answers = start_helper()
     memory = int(args[1]) * 2**20
     resource.setrlimit(resource.RLIMIT_DATA, (memory, memory))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-    try:
-        task: Task | None = registry.resolve_task(args[0])
-        failure = None
-    except Exception as error:  # a plugin may fail to import in any way
-        task, failure = None, _from_exception(f"could not load task {args[0]!r}:", error)
+    task, options, failure = _set_up(args[0], args[2])
     answer(answers, {"ready": failure is None})
     stages = None
-    if task is not None and len(args) >= 3:
-        stages = warm_up(task, json.loads(args[2]))
+    if task is not None:
+        stages = warm_up(task, options)
         if stages is not None and len(args) == 4:
             stages = itertools.islice(stages, int(args[3]))
     while line := next_request(sys.stdin, stages):
@@ -72,14 +72,27 @@ def main(argv: list[str] | None = None) -> int:
                 stages = _advance(stages)
             answer(answers, {"warm": True})
             continue
-        evaluation = failure or score(task, request["data"], request["settings"])
+        evaluation = failure or score(task, request["data"], request["settings"], options)
         answer(answers, evaluation.to_dict())
         if evaluation.status == "out_of_memory":
             return 0
     return 0
 
 
-def warm_up(task: Task, options: dict[str, Any]) -> Iterator[None] | None:
+def _set_up(name: str, options: str) -> tuple[TaskBase | None, Any, Evaluation | None]:
+    """The task, its options object (built from their JSON once) and, if either failed, the
+    evaluation every request gets instead."""
+    try:
+        task = registry.resolve_task(name)
+    except Exception as error:  # a plugin may fail to import in any way
+        return None, None, _from_exception(f"could not load task {name!r}:", error)
+    try:
+        return task, options_from_data(task.options_type, json.loads(options), task.name), None
+    except Exception as error:  # the task's own checks of its options may fail in any way
+        return None, None, _from_exception(f"the options of task {name!r} failed:", error)
+
+
+def warm_up(task: Task, options: Any) -> Iterator[None] | None:
     """The stages of the task's own ``warm_up_fit`` still to run (None: all done or none)."""
     try:
         stages = task.warm_up_fit(options)
@@ -119,10 +132,11 @@ def _warm_up_failed(error: Exception) -> None:
     print(f"warm-up failed: {described}\n{formatted}", file=sys.stderr)
 
 
-def score(task: Task, data: Any, settings: dict[str, Any]) -> Evaluation:
-    """The task's evaluation of ``data``; every failure becomes an invalid Evaluation."""
+def score(task: Task, data: Any, settings: dict[str, Any], options: Any) -> Evaluation:
+    """The task's evaluation of ``data`` with the request's ``settings`` and the worker's
+    ``options``; every failure becomes an invalid Evaluation."""
     try:
-        evaluation = task.evaluate(data, EvaluationSettings(**settings))
+        evaluation = task.evaluate(data, EvaluationSettings(**settings, options=options))
     except Exception as error:
         return _from_exception("evaluation raised", error)
     if not isinstance(evaluation, Evaluation):

@@ -1,4 +1,5 @@
-"""What the two helper processes of the sandbox share: their answer channel and error texts.
+"""What the two helper processes of the sandbox share: their answer channel and error texts,
+and the form evaluation settings take to reach a fit worker.
 
 The capture server (:mod:`.capture_server`) and the fit worker (:mod:`.fit_worker`) each read
 one JSON request per line of standard input and write one JSON answer per line on the
@@ -10,12 +11,39 @@ from __future__ import annotations
 import json
 import os
 import traceback
+from dataclasses import dataclass
 from typing import IO, Any
 
 from sga_agent.isolation import die_with_parent
+from sga_agent.options import options_json
+from sga_agent.task import EvaluationSettings
 
 #: Characters of an error message kept in a one-line reason.
 MAX_MESSAGE_CHARS = 300
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """:class:`~sga_agent.task.EvaluationSettings` on their way to a fit worker: the task
+    options as their JSON text, the one serialisation of them (a fit worker is started for one
+    task and options, on its command line, and builds the options object back once), and the
+    rest, which each request carries."""
+
+    epochs: int | None
+    learning_rate: float | None
+    seed: int
+    options: str
+
+    @classmethod
+    def of(cls, settings: EvaluationSettings) -> FitSettings:
+        """``settings`` ready to send; ``TypeError`` if their options cannot be (not a
+        dataclass, or holding a value JSON cannot write). No options: the task's defaults."""
+        options = "{}" if settings.options is None else options_json(settings.options)
+        return cls(settings.epochs, settings.learning_rate, settings.seed, options)
+
+    def request(self) -> dict[str, Any]:
+        """The settings each request carries: all but the options."""
+        return {"epochs": self.epochs, "learning_rate": self.learning_rate, "seed": self.seed}
 
 
 def start_helper() -> IO[str]:

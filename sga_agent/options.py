@@ -1,15 +1,20 @@
-"""Task options from ``KEY=VALUE`` text, checked against the task's options dataclass.
+"""A task's typed options: read from ``KEY=VALUE`` text once, at the edge (the command line, a
+run's config), and sent as JSON to the processes that evaluate.
 
 A task declares its options as a dataclass (``Task.options_type``, see :mod:`sga_agent.task`):
 each field's annotation gives the type (``int``, ``float``, ``bool``, ``str`` or a ``Literal``
 of allowed strings, optionally ``| None``) and its ``__post_init__`` any further rule. Text is
-converted field by field, then the dataclass is built so that its own checks run.
+converted field by field, then the dataclass is built once, so that its own checks run; from
+then on the options are that object. :func:`options_json` is its one serialisation (the run's
+config, the fit worker's command line) and :func:`options_from_data` builds it back, once, on
+the other side.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import difflib
+import json
 import math
 import types
 import typing
@@ -23,12 +28,20 @@ class OptionError(ValueError):
     """An unknown option or a bad value; the message names the option and what it takes."""
 
 
-def parse_options(options_type: type, raw: Mapping[str, str], task: str) -> dict[str, Any]:
-    """The options in ``raw`` (text values) converted to their fields' types.
+def parse_options(options_type: type, raw: Mapping[str, str], task: str) -> Any:
+    """The ``options_type`` object of the text values in ``raw`` (the rest by default).
 
-    Only the given keys are returned (the task's defaults stay the task's), as the dataclass
-    holds them after its ``__post_init__`` (which may normalise a value, e.g. make a path
-    absolute).
+    Raises
+    ------
+    OptionError
+        An unknown key (with the closest known one), or a value its field does not take.
+    """
+    return _built(options_type, typed_values(options_type, raw, task))
+
+
+def typed_values(options_type: type, raw: Mapping[str, str], task: str) -> dict[str, Any]:
+    """The text values in ``raw`` converted to their fields' types (the dataclass's own checks
+    are not run: :func:`parse_options` builds it).
 
     Raises
     ------
@@ -37,19 +50,59 @@ def parse_options(options_type: type, raw: Mapping[str, str], task: str) -> dict
     """
     hints = typing.get_type_hints(options_type)
     fields = {field.name: hints[field.name] for field in dataclasses.fields(options_type)}
-    values: dict[str, Any] = {}
-    for key, text in raw.items():
-        if key not in fields:
-            close = difflib.get_close_matches(key, fields, n=1)
+    _check_known(options_type, raw, task)
+    return {key: _convert(key, text, fields[key]) for key, text in raw.items()}
+
+
+def options_from_data(options_type: type, data: Mapping[str, Any], task: str) -> Any:
+    """The ``options_type`` object of ``data``, values typed already (what :func:`options_data`
+    gave, read back from JSON).
+
+    Raises
+    ------
+    OptionError
+        A key the options do not have (a run recorded by another version of the task), or a
+        value they refuse.
+    """
+    _check_known(options_type, data, task)
+    return _built(options_type, dict(data))
+
+
+def options_data(options: Any) -> dict[str, Any]:
+    """The options object as a dict of its fields (JSON values: its fields' types are)."""
+    if not dataclasses.is_dataclass(options) or isinstance(options, type):
+        raise TypeError(
+            f"task options must be the task's options dataclass (its options_type), got "
+            f"{type(options).__name__}: build it with parse_options or the dataclass itself"
+        )
+    return dataclasses.asdict(options)
+
+
+def options_json(options: Any) -> str:
+    """The options as JSON text (sorted keys: equal options, equal text); ``TypeError`` when
+    they are not a dataclass or hold a value JSON cannot write."""
+    data = options_data(options)
+    try:
+        return json.dumps(data, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"task options must be JSON-serialisable: {error}") from error
+
+
+def _check_known(options_type: type, given: Mapping[str, Any], task: str) -> None:
+    names = [field.name for field in dataclasses.fields(options_type)]
+    for key in given:
+        if key not in names:
+            close = difflib.get_close_matches(key, names, n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             known = describe_options(options_type) or "none"
             raise OptionError(f"task {task!r} has no option {key!r}{hint} (its options: {known})")
-        values[key] = _convert(key, text, fields[key])
+
+
+def _built(options_type: type, values: dict[str, Any]) -> Any:
     try:
-        built = options_type(**values)
+        return options_type(**values)
     except (TypeError, ValueError) as error:
         raise OptionError(str(error)) from None
-    return {key: getattr(built, key) for key in values}
 
 
 def describe_options(options_type: type) -> str:

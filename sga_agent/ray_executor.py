@@ -36,7 +36,6 @@ Ray is an optional dependency (:data:`RAY_INSTALL`), imported when a pool is cre
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import os
@@ -48,8 +47,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from types import ModuleType
 from typing import Any
 
+from sga_agent.helper_protocol import FitSettings
 from sga_agent.isolation import Isolation, detect_isolation
-from sga_agent.sandbox import EvaluationSlot, SandboxLimits, _settings_json
+from sga_agent.sandbox import EvaluationSlot, SandboxLimits
 from sga_agent.task import Evaluation, EvaluationSettings
 
 #: How to install the optional dependency.
@@ -205,13 +205,15 @@ class RayPool:
     def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
         """Start evaluating one solution on the cluster; the future's result is its Evaluation.
 
-        Raises ``TypeError`` at once if ``settings.options`` is not JSON-serialisable; a bad
-        candidate or a lost Ray slot never raises: its future holds an invalid Evaluation
-        (only the loss of this machine's Ray node makes it raise :class:`RayClusterLostError`).
+        Raises ``TypeError`` at once if ``settings.options`` cannot be sent (see
+        :func:`~sga_agent.sandbox.evaluate_in_sandbox`); a bad candidate or a lost Ray slot
+        never raises: its future holds an invalid Evaluation (only the loss of this machine's
+        Ray node makes it raise :class:`RayClusterLostError`). The options travel to the slots
+        as their JSON text.
         """
-        options = json.dumps(_settings_json(settings)["options"], sort_keys=True)
-        self._warm_up(task, options)
-        return self._executor.submit(self._evaluate, task, solution, settings)
+        sent = FitSettings.of(settings)
+        self._warm_up(task, sent.options)
+        return self._executor.submit(self._evaluate, task, solution, sent)
 
     def _warm_up(self, task: str, options: str) -> None:
         """Have every slot start its helpers for ``task`` and ``options``, once: they load
@@ -224,7 +226,7 @@ class RayPool:
         for actor in slots:
             actor.start_helpers.remote(task, options)
 
-    def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def _evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
         """One candidate on a free slot; once more on another if the slot dies meanwhile."""
         retried = ""
         for attempt in range(1 + SLOT_RETRIES):
@@ -353,7 +355,7 @@ class NodeSlot:
         with contextlib.suppress(OSError):  # the evaluation that needs them will report it
             self._slot.start_helpers(task, options)
 
-    def evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
         """One sandboxed evaluation on this node (never raises); its extras name the node."""
         try:
             evaluation = self._slot.evaluate(task, solution, settings)

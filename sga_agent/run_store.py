@@ -2,7 +2,8 @@
 
 Layout of ``runs/<id>/``::
 
-    config.json            the resolved SearchConfig
+    config.json            the resolved SearchConfig (SearchConfig.to_dict; a run written
+                           before its components has a flat one, read all the same)
     events.jsonl           one JSON object per line, flushed and fsynced per event
     candidates/<id>/       messages.json (the prompt, when the proposer read it),
                            response.txt, proposal.json, code.py, evaluation.json,
@@ -36,7 +37,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from sga_agent import events as ev
-from sga_agent.config import SearchConfig
+from sga_agent.config import SearchConfig, current_format
 from sga_agent.task import Evaluation
 
 CONFIG, EVENTS, SUMMARY, LOCK = "config.json", "events.jsonl", "summary.json", "run.lock"
@@ -170,9 +171,18 @@ class RunStore:
         if handle is not None:
             handle.close()
 
-    def config(self) -> SearchConfig:
+    def config_record(self) -> dict[str, Any]:
+        """The run's config as recorded, in the current layout
+        (:func:`~sga_agent.config.current_format`), its task options a dict: what can be read
+        without the task (its name, the seed)."""
         data = json.loads((self.path / CONFIG).read_text(encoding="utf-8"))
-        return SearchConfig.from_dict(data["config"])
+        return current_format(data["config"])
+
+    def config(self, options_type: type) -> SearchConfig:
+        """The run's config, its task options built as an ``options_type`` object (the task's:
+        load the task named by :meth:`config_record` once); raises
+        :class:`~sga_agent.config.ConfigError` for settings this version refuses."""
+        return SearchConfig.from_dict(self.config_record(), options_type)
 
     # ------------------------------------------------------------------ events
 

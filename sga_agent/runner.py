@@ -1,6 +1,9 @@
 """Assembling a search from its config: task, proposer, evaluation pool, run store.
 
-Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python).
+Shared by ``sga-agent search`` and ``sga-agent resume`` (and usable from Python). A process
+resolves its task once (``registry.load_task``) and hands it on: the task's options are read
+from text once (:func:`task_options`), and the task is set up for them once
+(:func:`~sga_agent.task.configured`).
 """
 
 from __future__ import annotations
@@ -9,21 +12,22 @@ import contextlib
 import dataclasses
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from sga_agent import registry
 from sga_agent.config import SearchConfig
 from sga_agent.events import SandboxReady
+from sga_agent.options import parse_options
 from sga_agent.proposers.base import Proposer
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.proposers.replay import ReplayProposer
 from sga_agent.ray_executor import RayPool
 from sga_agent.run_store import RunStore
-from sga_agent.sandbox import SandboxLimits, SandboxPool, threads_per_worker
+from sga_agent.sandbox import SandboxPool, threads_per_worker
 from sga_agent.search import Search, SearchResult
-from sga_agent.task import Task, as_task, configured
+from sga_agent.task import Task, TaskBase, as_task, configured
 
 REPLAY_PREFIX = "replay:"
 BUILTIN = "builtin"
@@ -31,6 +35,25 @@ BUILTIN = "builtin"
 
 class ProposerChoiceError(ValueError):
     """The requested proposer does not exist for this task."""
+
+
+def is_builtin(proposer: str) -> bool:
+    """Whether ``proposer`` names the task's built-in proposer ("builtin", "builtin:gp")."""
+    return proposer == BUILTIN or proposer.startswith(BUILTIN + ":")
+
+
+def task_options(task: TaskBase, raw: Mapping[str, str], proposer: str) -> Any:
+    """The run's options object, read once from ``raw`` (``--option`` texts), which win over
+    the task's :attr:`~sga_agent.task.TaskBase.builtin_options` when ``proposer`` is its
+    built-in one (the constitutive GP's ``optimizer=lbfgs``).
+
+    Raises
+    ------
+    sga_agent.options.OptionError
+        An unknown option, or a value the task refuses.
+    """
+    given = {**task.builtin_options, **raw} if is_builtin(proposer) else dict(raw)
+    return parse_options(task.options_type, given, task.name)
 
 
 def make_proposer(config: SearchConfig, task: Task) -> Proposer:
@@ -47,7 +70,7 @@ def make_proposer(config: SearchConfig, task: Task) -> Proposer:
     """
     if config.proposer.startswith(REPLAY_PREFIX):
         return ReplayProposer(Path(config.proposer[len(REPLAY_PREFIX) :]))
-    if config.proposer == BUILTIN or config.proposer.startswith(BUILTIN + ":"):
+    if is_builtin(config.proposer):
         builtin = as_task(task).builtin_proposer()
         if builtin is None:
             raise ProposerChoiceError(f"task {task.name!r} has no built-in proposer; use --model")
@@ -59,16 +82,6 @@ def make_proposer(config: SearchConfig, task: Task) -> Proposer:
     from sga_agent.proposers.litellm_backbone import BackboneSettings, LiteLLMProposer
 
     return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
-
-
-def with_preferred_options(config: SearchConfig, proposer: Proposer) -> SearchConfig:
-    """``config`` with the task options a built-in proposer is meant to run with (its
-    ``task_options``, e.g. the constitutive GP's ``{"optimizer": "lbfgs"}``) added; options
-    the config sets already win."""
-    preferred = getattr(proposer, "task_options", None)
-    if not preferred:
-        return config
-    return dataclasses.replace(config, task_options={**preferred, **config.task_options})
 
 
 def replayed_answers(config: SearchConfig) -> dict[str, dict[str, Any]]:
@@ -85,22 +98,20 @@ def make_pool(config: SearchConfig) -> SandboxPool | RayPool:
     Raises
     ------
     sga_agent.ray_executor.RayUnavailableError
-        The ray executor without Ray installed, or with no cluster at ``config.ray_address``.
+        The ray executor without Ray installed, or with no cluster at its ``ray_address``.
     """
-    if config.executor == "local":
-        threads = threads_per_worker(config.workers)
-    else:  # the CPUs a Ray slot reserves are the threads of its fit's parallel loops
-        threads = max(1, math.floor(config.ray_cpus_per_task))
-    limits = SandboxLimits(timeout_s=config.timeout_s, memory_mb=config.memory_mb,
-                           threads=threads)  # fmt: skip
-    if config.executor == "local":
-        return SandboxPool(max_workers=config.workers, limits=limits)
+    executor = config.executor
+    if executor.kind == "local":
+        limits = config.sandbox.limits(threads_per_worker(executor.workers))
+        return SandboxPool(max_workers=executor.workers, limits=limits)
+    # the CPUs a Ray slot reserves are the threads of its fit's parallel loops
+    limits = config.sandbox.limits(max(1, math.floor(executor.ray_cpus_per_task)))
     return RayPool(
-        config.ray_address,
+        executor.ray_address,
         limits,
-        cpus_per_task=config.ray_cpus_per_task,
-        memory_mb=config.ray_memory_mb,
-        local_cpus=math.ceil(config.workers * config.ray_cpus_per_task),
+        cpus_per_task=executor.ray_cpus_per_task,
+        memory_mb=executor.ray_memory_mb,
+        local_cpus=math.ceil(executor.workers * executor.ray_cpus_per_task),
     )
 
 
@@ -118,28 +129,32 @@ def run(
     store: RunStore,
     on_event: Callable[[dict[str, Any]], None] | None = None,
     proposer: Proposer | None = None,
+    task: Task | None = None,
 ) -> SearchResult:
-    """Run (or continue) the search ``config`` describes, recording into ``store``; the
-    proposer is ``make_proposer``'s unless given."""
-    task = configured(registry.load_task(config.task), config.task_options)
+    """Run (or continue) the search ``config`` describes, recording into ``store``. ``task``
+    is the run's task set up for its options (:func:`~sga_agent.task.configured`), resolved
+    from ``config.task`` unless given; the proposer is ``make_proposer``'s unless given."""
+    if task is None:
+        task = configured(registry.load_task(config.task), config.task_options)
     if proposer is None:
         proposer = make_proposer(config, task)
     with make_pool(config) as pool:
         store.append(pool_record(pool))
         search = Search(config, task, proposer, pool, store, on_event)
         result = search.run()
-    record_findings(store, task)
+    record_findings(store, task, config.task_options)
     return result
 
 
-def record_findings(store: RunStore, task: Task) -> None:
+def record_findings(store: RunStore, task: Task, options: Any) -> None:
     """Complete the run's ``summary.json`` with what it found (:mod:`sga_agent.report.findings`):
     the best loss against the seed's and the true law's, the best solution with its fitted
-    constants, the task's assessment (its free run, for instance). Read back from the run
-    folder, as the report does; the search core knows nothing of it."""
+    constants, the task's assessment with the run's ``options`` object (its free run, for
+    instance). Read back from the run folder, as the report does; the search core knows
+    nothing of it."""
     from sga_agent.report.data import read_run
     from sga_agent.report.findings import find
 
     with contextlib.redirect_stdout(sys.stderr):  # stdout may carry --json (Taichi prints)
-        findings = find(read_run(store.path), task).to_dict()
+        findings = find(read_run(store.path), task, options).to_dict()
     store.save_summary({**store.summary(), "findings": findings})

@@ -66,6 +66,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from sga_agent.helper_protocol import FitSettings
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.task import STATUSES, Evaluation, EvaluationSettings
 
@@ -472,7 +473,7 @@ class EvaluationSlot:
         self,
         task: str,
         solution: str,
-        settings: EvaluationSettings,
+        settings: FitSettings,
         on_captured: Callable[[str, str], None] | None = None,
     ) -> Evaluation:
         """Capture then fit one solution; every failure is an invalid Evaluation.
@@ -483,8 +484,7 @@ class EvaluationSlot:
         had the first time.
         """
         start = time.monotonic()
-        request = _settings_json(settings)
-        options = json.dumps(request["options"], sort_keys=True)
+        options, request = settings.options, settings.request()
         self._start_fit_worker(task, options)
         retried: list[str] = []
         attempt = start
@@ -877,16 +877,6 @@ def _signal_name(number: int) -> str:
         return f"signal {number}"
 
 
-def _settings_json(settings: EvaluationSettings) -> dict[str, Any]:
-    """``settings`` as JSON-ready data; ``TypeError`` if its options are not serialisable."""
-    data = asdict(settings)
-    try:
-        json.dumps(data)
-    except (TypeError, ValueError) as error:
-        raise TypeError(f"settings.options must be JSON-serialisable: {error}") from error
-    return data
-
-
 def evaluate_in_sandbox(
     task: str,
     solution: str,
@@ -906,7 +896,8 @@ def evaluate_in_sandbox(
     solution : str
         The candidate's text (code), passed unchanged to the task's ``capture``.
     settings : EvaluationSettings
-        Passed to the task's ``evaluate``; ``options`` must be JSON-serialisable.
+        Passed to the task's ``evaluate``; ``options`` must be the task's options object (or
+        None), sent as JSON (:class:`~sga_agent.helper_protocol.FitSettings`).
     limits : SandboxLimits
         Time, memory, file-size and thread limits, and whether to confine the capture.
     extra_python_path : sequence of path-like
@@ -922,12 +913,12 @@ def evaluate_in_sandbox(
     Raises
     ------
     TypeError
-        ``settings.options`` is not JSON-serialisable (a caller error, not a candidate's).
+        ``settings.options`` cannot be sent (a caller error, not a candidate's).
     """
-    _settings_json(settings)
+    sent = FitSettings.of(settings)
     evaluator = EvaluationSlot(limits, extra_python_path, one_shot=True)
     try:
-        return evaluator.evaluate(task, solution, settings)
+        return evaluator.evaluate(task, solution, sent)
     finally:
         evaluator.close()
 
@@ -988,11 +979,12 @@ class SandboxPool:
     def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
         """Start evaluating one solution; the future's result is its :class:`Evaluation`.
 
-        Raises ``TypeError`` at once if ``settings.options`` is not JSON-serialisable; a bad
-        candidate never raises: its future holds an invalid Evaluation.
+        Raises ``TypeError`` at once if ``settings.options`` cannot be sent (see
+        :func:`evaluate_in_sandbox`); a bad candidate never raises: its future holds an invalid
+        Evaluation.
         """
-        _settings_json(settings)
-        return self._executor.submit(self._evaluate, task, solution, settings)
+        sent = FitSettings.of(settings)
+        return self._executor.submit(self._evaluate, task, solution, sent)
 
     def map(
         self, task: str, solutions: Iterable[str], settings: EvaluationSettings
@@ -1032,7 +1024,7 @@ class SandboxPool:
         else:
             self.terminate()
 
-    def _evaluate(self, task: str, solution: str, settings: EvaluationSettings) -> Evaluation:
+    def _evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
         evaluator = self._slots.get()
         try:
             return evaluator.evaluate(task, solution, settings, self._start_idle_slots)

@@ -17,14 +17,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from sga_agent import events as ev
-from sga_agent.config import SearchConfig
+from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.fingerprint import fingerprint
 from sga_agent.heap import Entry, SolutionHeap
 from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.prompting import Shown, build_messages
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
 from sga_agent.run_store import SEED, RunStore
-from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task
+from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
 __all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals"]
 
@@ -68,6 +68,8 @@ class Search:
     Parameters
     ----------
     config : SearchConfig
+        Its loop, budgets and evaluation settings; its task options must be of the task's
+        ``options_type``.
     task : Task
         The task object (only its kind, seed, prompt parts and solution checks are used here;
         evaluation happens in the evaluator's workers).
@@ -89,7 +91,15 @@ class Search:
         store: RunStore,
         on_event: Callable[[dict[str, Any]], None] | None = None,
     ) -> None:
+        wanted = options_type(task)
+        if not isinstance(config.task_options, wanted):
+            raise ConfigError(
+                f"task {config.task!r} takes options of type {wanted.__name__}, the config "
+                f"holds {type(config.task_options).__name__}: build them with the task's "
+                "options_type (sga_agent.options.parse_options reads them from text)"
+            )
         self.config = config
+        self.loop = config.loop
         self.task = task
         self.proposer = proposer
         self.evaluator = evaluator
@@ -101,12 +111,7 @@ class Search:
         self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self.heap = SolutionHeap()
         self.totals = Totals()
-        self.settings = EvaluationSettings(
-            epochs=config.epochs if config.bilevel else 0,
-            learning_rate=config.learning_rate,
-            seed=config.seed,
-            options=dict(config.task_options),
-        )
+        self.settings: EvaluationSettings = config.evaluation_settings()
 
     # ------------------------------------------------------------------ the loop
 
@@ -122,21 +127,21 @@ class Search:
         self._emit(ev.SearchStarted(resumed=bool(self._evaluations)))
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
-        for iteration in range(1, self.config.iterations + 1):
-            stopped = self._budget_exceeded()
+        for iteration in range(1, self.loop.iterations + 1):
+            stopped = self.config.budgets.exceeded(self.totals)
             if stopped:
                 break
             self._emit(ev.IterationStarted(iteration))
-            answers = self._answers_for(iteration, self.heap.top(self.config.top_k))
+            answers = self._answers_for(iteration, self.heap.top(self.loop.top_k))
             stopped = self._evaluate_all(
                 [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
             )
-            top = [entry.summary() for entry in self.heap.top(self.config.top_k)]
+            top = [entry.summary() for entry in self.heap.top(self.loop.top_k)]
             self.store.save_heap(iteration, top)
             self._emit(ev.IterationDone(iteration, top))
             if stopped:
                 break
-        result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.config.top_k))
+        result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.loop.top_k))
         self.store.save_summary(self._summary(result))
         self._emit(ev.RunFinished(stopped))
         return result
@@ -144,7 +149,7 @@ class Search:
     # ------------------------------------------------------------------ proposals
 
     def _slots(self, iteration: int) -> list[tuple[str, float]]:
-        cfg = self.config
+        cfg = self.loop
         return [
             (f"{iteration:02d}-exploit-{j:02d}", cfg.exploit_temperature)
             for j in range(cfg.exploit)
@@ -166,7 +171,7 @@ class Search:
         prompt = functools.cache(functools.partial(self._messages, shown))
         parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
         for temperature, candidates in missing.items():
-            if self._budget_exceeded():
+            if self.config.budgets.exceeded(self.totals):
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
             request = ProposalRequest(candidates, temperature, seed, parents, prompt)
@@ -238,7 +243,7 @@ class Search:
                 if candidate not in self._evaluations:
                     self._store(candidate, code, rejection)
             elif not known and key not in submitted:
-                limit = self.config.max_evaluations
+                limit = self.config.budgets.max_evaluations
                 if limit is not None and self.totals.evaluations + len(submitted) >= limit:
                     stopped = f"max_evaluations={limit} reached"
                     break
@@ -282,16 +287,6 @@ class Search:
         )  # fmt: skip
 
     # ------------------------------------------------------------------ bookkeeping
-
-    def _budget_exceeded(self) -> str:
-        cfg, totals = self.config, self.totals
-        if cfg.max_usd is not None and totals.cost_usd >= cfg.max_usd:
-            return f"max_usd={cfg.max_usd} reached"
-        if cfg.max_tokens is not None and totals.tokens >= cfg.max_tokens:
-            return f"max_tokens={cfg.max_tokens} reached"
-        if cfg.max_evaluations is not None and totals.evaluations >= cfg.max_evaluations:
-            return f"max_evaluations={cfg.max_evaluations} reached"
-        return ""
 
     def _emit(self, event: ev.Event) -> None:
         """Record ``event``, then show it (as its dict, with the totals) to ``on_event``."""

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sga_agent.options import describe_options
+from sga_agent.options import describe_options, options_from_data, options_json, typed_values
 from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.task import (
     Assessment,
@@ -67,12 +67,13 @@ def check_task(
         The task object, as its entry point makes it.
     options : dict, optional
         Task options (typed values) the checks run with, as a run's ``--option`` values give
-        them: needed where the task has options without a default; the task is set up for
-        them with ``with_options`` first.
+        them: needed where the task has options without a default. They are built into the
+        task's options object, which must survive JSON (a fit worker builds it from that),
+        and the task is set up for it with ``with_options`` first.
     evaluate : bool
         Also score the captured seed (a real evaluation: as slow as the task's fit).
     settings : EvaluationSettings, optional
-        For that evaluation; default: no inner optimization (``epochs=0``).
+        For that evaluation; default: no inner optimization (``epochs=0``), those options.
 
     Raises
     ------
@@ -83,13 +84,14 @@ def check_task(
     if not isinstance(task, Task):
         missing = [name for name in REQUIRED if not hasattr(task, name)]
         raise ContractError(f"{type(task).__name__} lacks {', '.join(missing)} (required)")
-    options = dict(options or {})
-    full = configured(task, options) if options else as_task(task)
-    _collect(problems, "options", lambda: _options(full, options))
+    base = as_task(task)
+    built = _collect(problems, "options", lambda: _options(base, dict(options or {})))
+    full = base if built is None else configured(base, built)
     for check in (_identity, _misspelt_hooks, _prompt, _warm_up, _report_hooks):
         _collect(problems, check.__name__, lambda c=check: c(task, full))
     data = _collect(problems, "the seed", lambda: _seed(full))
     if evaluate and data is not None:
+        settings = settings or EvaluationSettings(epochs=0, options=built)
         _collect(problems, "evaluate", lambda: _evaluation(full, data, settings))
     _collect(problems, "builtin_proposer", lambda: _builtin(full))
     if problems:
@@ -132,21 +134,29 @@ def _misspelt_hooks(task: Task, full: TaskBase) -> None:
             raise ContractError(f"{name!r} is no hook of the contract; did you mean {close[0]!r}?")
 
 
-def _options(full: TaskBase, options: dict[str, Any]) -> None:
+def _options(full: TaskBase, options: dict[str, Any]) -> Any:
+    """The options object of ``options`` (the rest by default), once its type is checked."""
     kind = full.options_type
     _expect(dataclasses.is_dataclass(kind), "options_type must be a dataclass")
-    built = kind(**options)  # the options given, the rest by default
     describe_options(kind)  # every field's type is one options can be read as
     hints = typing.get_type_hints(kind)
     for field in dataclasses.fields(kind):
         _expect(field.name in hints, f"option {field.name!r} has no type")
-    typed = {f.name: getattr(built, f.name) for f in dataclasses.fields(kind)}
-    _expect(isinstance(full.with_options(typed), Task), "with_options must return a task")
+    built = options_from_data(kind, options, full.name)
+    sent = options_from_data(kind, json.loads(options_json(built)), full.name)
+    _expect(sent == built, "the options must survive JSON unchanged (a fit worker gets them so)")
+    preferred = full.builtin_options
+    _expect(all(isinstance(text, str) for text in preferred.values()),
+            "builtin_options must map option names to texts, as --option takes them")  # fmt: skip
+    preferred_values = typed_values(kind, preferred, full.name)  # options it has, values they take
+    dataclasses.replace(built, **preferred_values)  # and its checks accept
+    _expect(isinstance(full.with_options(built), Task), "with_options must return a task")
     _expect(
         isinstance(full.capture_modules, tuple)
         and all(isinstance(m, str) for m in full.capture_modules),
         "capture_modules must be a tuple of module names",
     )
+    return built
 
 
 def _prompt(task: Task, full: TaskBase) -> None:
@@ -180,13 +190,13 @@ def _seed(full: TaskBase) -> dict[str, Any]:
     return data
 
 
-def _evaluation(full: TaskBase, data: dict[str, Any], settings: EvaluationSettings | None):
-    result = full.evaluate(data, settings or EvaluationSettings(epochs=0))
+def _evaluation(full: TaskBase, data: dict[str, Any], settings: EvaluationSettings):
+    result = full.evaluate(data, settings)
     _expect(isinstance(result, Evaluation), "evaluate must return an Evaluation")
     _expect(result.valid, f"the seed must score: {result.reason}")
     _expect(not math.isnan(result.loss), "the seed's loss is NaN")
     json.dumps(result.to_dict())  # what the run store writes
-    nothing = full.evaluate({}, settings or EvaluationSettings(epochs=0))
+    nothing = full.evaluate({}, settings)
     _expect(isinstance(nothing, Evaluation) and not nothing.valid,
             "evaluate({}) must return an invalid Evaluation, not raise")  # fmt: skip
 

@@ -5,6 +5,7 @@ the check itself finds what a plugin gets wrong."""
 from __future__ import annotations
 
 import importlib.util
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -113,3 +114,25 @@ def test_the_check_lists_every_broken_promise():
 def test_an_object_without_the_required_members_is_refused():
     with pytest.raises(ContractError, match="lacks .*seed_solution"):
         check_task(object())
+
+
+@dataclass(frozen=True)
+class Lossy:
+    """Options a fit worker would get back changed: JSON turns the tuple into a list."""
+
+    sizes: tuple = (1, 2)
+
+
+class LossyOptions(example_plugin().NumbersTask):
+    options_type = Lossy
+
+
+class MisnamedBuiltinOptions(example_plugin().NumbersTask):
+    builtin_options = {"sizez": "3"}
+
+
+def test_the_check_finds_options_a_fit_worker_would_not_get_back():
+    with pytest.raises(ContractError, match="the options must survive JSON unchanged"):
+        check_task(LossyOptions(), evaluate=False)
+    with pytest.raises(ContractError, match="has no option 'sizez'"):
+        check_task(MisnamedBuiltinOptions(), evaluate=False)

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import os
 import sys
@@ -13,13 +12,12 @@ from typing import Any
 
 import click
 
-from sga_agent import registry
 from sga_agent.benchmark import chart, table
 from sga_agent.benchmark.grid import GridError, Method, plan_cells, run_cells
-from sga_agent.cli.options import task_options, typed_task_options
-from sga_agent.config import SearchConfig
+from sga_agent.cli.options import task_options
+from sga_agent.config import RUN_SETTINGS, SETTINGS, setting_field
 
-#: SearchConfig fields the grid or its own options set, not ``--set``.
+#: Settings (flat names) the grid or its own options set, not ``--set``.
 OWN_SETTINGS = {
     "task": "--tasks", "proposer": "the methods", "preset": "the methods", "seed": "--seeds",
     "task_options": "--option", "epochs": "--epochs", "api_base": "--api-base",
@@ -56,8 +54,8 @@ def _pairs(
 
 
 def parse_settings(ctx: click.Context, param: click.Parameter, items: tuple[str, ...]):
-    """Click callback: search settings KEY=VALUE, converted to the SearchConfig field's type."""
-    types = {f.name: str(f.type) for f in dataclasses.fields(SearchConfig)}
+    """Click callback: search settings KEY=VALUE (flat names), converted to their types."""
+    types = {name: str(setting_field(name).type) for name in (*RUN_SETTINGS, *SETTINGS)}
     settings: dict[str, Any] = {}
     for key, raw in _pairs(items, "iterations=2", ctx, param):
         if key in OWN_SETTINGS:
@@ -135,7 +133,7 @@ def run_benchmark(
     tasks: Sequence[str],
     seeds: Sequence[int],
     out: Path,
-    task_options: dict[str, Any],
+    task_options: dict[str, str],
     epochs: int | None,
     settings: dict[str, Any],
     api_base: str | None,
@@ -143,11 +141,9 @@ def run_benchmark(
     parallel: int | None,
 ) -> None:
     """Plan and run the grid, then write and print its table; exit 1 if a cell failed."""
-    typed = _typed_options(tasks, task_options)
-    shared = {**settings, "task_options": typed, "epochs": epochs,
-              "api_base": api_base, "workers": workers}  # fmt: skip
+    shared = {**settings, "epochs": epochs, "api_base": api_base, "workers": workers}
     try:
-        cells = plan_cells(tasks, methods, seeds, out, shared)
+        cells = plan_cells(tasks, methods, seeds, out, shared, task_options)
         failures = run_cells(cells, parallel or default_parallel(workers))
     except GridError as error:
         raise click.UsageError(str(error)) from error
@@ -164,21 +160,3 @@ def run_benchmark(
         click.echo(f"{len(failures)} cells failed; run the same command again to resume them",
                    err=True)  # fmt: skip
         sys.exit(1)
-
-
-def _typed_options(tasks: Sequence[str], raw: dict[str, str]) -> dict[str, Any]:
-    """The shared ``--option`` values, checked against every task's options; a usage error
-    when a task lacks one or they mean different things to two tasks."""
-    if not raw:
-        return {}
-    typed: dict[str, Any] | None = None
-    for name in tasks:
-        try:
-            task = registry.load_task(name)
-        except registry.UnknownTaskError as error:
-            raise click.UsageError(str(error)) from error
-        options = typed_task_options(task, raw)
-        if typed is not None and options != typed:
-            raise click.UsageError(f"--option values mean different things to the tasks: {raw}")
-        typed = options
-    return typed or {}

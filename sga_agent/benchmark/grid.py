@@ -26,8 +26,9 @@ from typing import Any
 from sga_agent import registry, runner
 from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.events import IterationDone, RunResumed
+from sga_agent.options import OptionError
 from sga_agent.run_store import CONFIG, EVENTS, SUMMARY, RunStore, RunStoreError
-from sga_agent.task import Task
+from sga_agent.task import TaskBase, configured
 
 #: Settings of where a cell runs, not what it computes: a recorded cell may differ in them.
 NEUTRAL_SETTINGS = frozenset(
@@ -62,8 +63,8 @@ class Method:
     preset : str
         A :data:`~sga_agent.config.PRESETS` name.
     overrides : mapping
-        :class:`~sga_agent.config.SearchConfig` settings of this method only; they win over
-        the grid's shared settings.
+        :class:`~sga_agent.config.SearchConfig` settings (flat names) of this method only;
+        they win over the grid's shared settings.
     """
 
     label: str
@@ -100,13 +101,16 @@ def plan_cells(
     seeds: Sequence[int],
     out: Path,
     settings: Mapping[str, Any] | None = None,
+    options: Mapping[str, str] | None = None,
 ) -> list[Cell]:
     """Every cell of the grid, checked before anything runs.
 
-    ``settings`` are :class:`~sga_agent.config.SearchConfig` values shared by all cells (task
-    options, epochs, workers, ...). Checked: names are registered tasks and presets, settings
-    are valid, each proposer is available for each task (a built-in one exists, a model string
-    is well-formed, a replayed run is found), and no cell folder holds a run with other settings.
+    ``settings`` are :class:`~sga_agent.config.SearchConfig` values (flat names) shared by all
+    cells (epochs, workers, ...), ``options`` the task options (``KEY=VALUE`` texts) of every
+    cell, read by each task into its options once. Checked: names are registered tasks and
+    presets, settings and options are valid, each proposer is available for each task (a
+    built-in one exists, a model string is well-formed, a replayed run is found), and no cell
+    folder holds a run with other settings.
 
     Raises
     ------
@@ -116,14 +120,16 @@ def plan_cells(
     _check_axes(tasks, methods, seeds)
     cells = []
     for task in tasks:
-        loaded = None
+        loaded = _load(task)
         for method in methods:
-            chosen = None
+            try:
+                typed = runner.task_options(loaded, options or {}, method.proposer)
+            except OptionError as error:
+                raise GridError(f"--option: {error}") from error
             if not method.proposer.startswith(runner.REPLAY_PREFIX):
-                loaded = _load(task) if loaded is None else loaded
                 try:
-                    probe = SearchConfig(task=task, proposer=method.proposer)
-                    chosen = runner.make_proposer(probe, loaded)
+                    probe = SearchConfig(task=task, proposer=method.proposer, task_options=typed)
+                    runner.make_proposer(probe, configured(loaded, typed))
                 except ValueError as error:  # no such built-in, malformed model string
                     raise GridError(f"method {method.label!r} on task {task!r}: {error}") from error
             for seed in seeds:
@@ -132,12 +138,11 @@ def plan_cells(
                     source = Path(proposer[len(runner.REPLAY_PREFIX) :])
                     proposer = f"{runner.REPLAY_PREFIX}{replay_source(source, task, seed)}"
                 values = {**(settings or {}), **method.overrides}
-                values.update(task=task, proposer=proposer, seed=seed)
+                values.update(task=task, proposer=proposer, seed=seed, task_options=typed)
                 try:
                     config = SearchConfig.from_preset(method.preset, **values)
-                except (ConfigError, TypeError) as error:
+                except ConfigError as error:
                     raise GridError(f"method {method.label!r}: {error}") from error
-                config = runner.with_preferred_options(config, chosen)
                 folder = Path(out) / task / method.folder / f"seed-{seed}"
                 cells.append(Cell(task, method, seed, folder, config))
     for cell in cells:
@@ -145,7 +150,7 @@ def plan_cells(
     return cells
 
 
-def _load(task: str) -> Task:
+def _load(task: str) -> TaskBase:
     try:
         return registry.load_task(task)
     except Exception as error:  # a plugin may fail to import in any way
@@ -185,20 +190,20 @@ def replay_source(path: Path, task: str, seed: int) -> Path:
     """
     if not path.is_dir():
         raise GridError(f"replay:{path}: no such folder; give a run folder or a folder of runs")
-    runs: dict[Path, SearchConfig] = {}
+    runs: dict[Path, dict[str, Any]] = {}
     for config_file in sorted(path.rglob(CONFIG)):
         if (config_file.parent / EVENTS).is_file():
-            runs[config_file.parent.resolve()] = _recorded_config(config_file.parent)
+            runs[config_file.parent.resolve()] = _recorded(config_file.parent)
     if not runs:
         raise GridError(f"replay:{path} holds no run folder (a folder with {CONFIG} and {EVENTS})")
-    of_task = {run: config for run, config in runs.items() if config.task == task}
+    of_task = {run: config for run, config in runs.items() if config.get("task") == task}
     if not of_task:
-        found = ", ".join(sorted({config.task for config in runs.values()}))
+        found = ", ".join(sorted({str(config.get("task")) for config in runs.values()}))
         raise GridError(
             f"replay:{path} holds no run of task {task!r} (only of: {found}); replay it on "
             "those tasks, or point replay: at a folder with a run of each task"
         )
-    same_seed = [run for run, config in of_task.items() if config.seed == seed]
+    same_seed = [run for run, config in of_task.items() if config.get("seed", 0) == seed]
     chosen = same_seed or list(of_task)
     if len(chosen) > 1:
         listing = ", ".join(str(run) for run in chosen[:4])
@@ -209,9 +214,18 @@ def replay_source(path: Path, task: str, seed: int) -> Path:
     return chosen[0]
 
 
-def _recorded_config(run_dir: Path) -> SearchConfig:
+def _recorded(run_dir: Path) -> dict[str, Any]:
+    """The run's config as recorded (:meth:`~sga_agent.run_store.RunStore.config_record`)."""
     try:
-        return RunStore.open(run_dir).config()
+        return RunStore.open(run_dir).config_record()
+    except (RunStoreError, ValueError, KeyError) as error:
+        raise GridError(f"{run_dir} is not a readable run folder: {error}") from error
+
+
+def _recorded_config(run_dir: Path, options_type: type) -> SearchConfig:
+    """The run's config, its task options an ``options_type`` object."""
+    try:
+        return RunStore.open(run_dir).config(options_type)
     except (RunStoreError, ConfigError, ValueError, KeyError) as error:
         raise GridError(f"{run_dir} is not a readable run folder: {error}") from error
 
@@ -239,8 +253,8 @@ def cell_run(cell: Cell) -> RunStore | None:
         store = RunStore.open(runs[0])
     except RunStoreError as error:
         raise GridError(f"{runs[0]}: {error}; delete it to run the cell again") from error
-    recorded = _recorded_config(store.path).to_dict()
-    wanted = cell.config.to_dict()
+    recorded = _recorded_config(store.path, type(cell.config.task_options)).settings()
+    wanted = cell.config.settings()
     different = [
         f"{key}: {recorded.get(key)!r} there, {value!r} here"
         for key, value in wanted.items()
@@ -300,7 +314,7 @@ def _progress(cell: Cell) -> Callable[[dict[str, Any]], None]:
         if event.get("type") == IterationDone.type:
             top = event.get("top") or [{}]
             say(
-                f"{cell.name}: iteration {event['iteration']}/{cell.config.iterations}, "
+                f"{cell.name}: iteration {event['iteration']}/{cell.config.loop.iterations}, "
                 f"best loss {top[0].get('loss')}"
             )
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import re
 import sys
 from pathlib import Path
-from typing import Any
 
 import click
 from rich.console import Console
@@ -89,7 +88,7 @@ def evaluate(
     file: Path,
     epochs: int | None,
     learning_rate: float | None,
-    options: dict[str, Any],
+    options: dict[str, str],
     as_json: bool,
     timeout_s: float,
     memory_mb: int,

@@ -7,9 +7,9 @@ from typing import Any
 
 import click
 
-from sga_agent import registry
-from sga_agent.options import OptionError, parse_options
-from sga_agent.task import Task, options_type
+from sga_agent import registry, runner
+from sga_agent.options import OptionError
+from sga_agent.task import TaskBase
 
 
 def key_value_options(items: Iterable[str]) -> dict[str, str]:
@@ -37,10 +37,12 @@ def task_options(ctx: click.Context, param: click.Parameter, items: tuple[str, .
         raise click.BadParameter(str(error), ctx, param) from None
 
 
-def typed_task_options(task: Task, raw: dict[str, str]) -> dict[str, Any]:
-    """``raw`` checked against the task's options dataclass and typed; a usage error if not."""
+def typed_task_options(task: TaskBase, raw: dict[str, str], proposer: str = "") -> Any:
+    """The task's options object read from ``raw`` (with its built-in proposer's options,
+    when ``proposer`` is that: :func:`sga_agent.runner.task_options`); a usage error if
+    ``raw`` does not fit the task's options."""
     try:
-        return parse_options(options_type(task), raw, task.name)
+        return runner.task_options(task, raw, proposer)
     except OptionError as error:
         raise click.BadParameter(str(error), param_hint="'--option'") from None
 

@@ -54,7 +54,7 @@ class SearchProgress:
         done = list((recorded or Recorded()).evaluations.values())
         self.best = min((e.loss for e in done if e.valid), default=math.inf)
         self.failed = sum(not e.valid for e in done)
-        total = 1 + config.iterations * config.offspring
+        total = 1 + config.loop.iterations * config.loop.offspring
         description = "resuming" if done else "seed"
         self.bar = self.progress.add_task(
             description, total=total, completed=len(done), status=self._status(None)
@@ -80,7 +80,7 @@ class SearchProgress:
             self.failed += 1
             self.progress.advance(self.bar)
         elif kind == ev.IterationStarted.type:
-            description = f"iteration {event['iteration']}/{self.config.iterations}"
+            description = f"iteration {event['iteration']}/{self.config.loop.iterations}"
             self.progress.update(self.bar, description=description)
         elif kind == ev.RunFinished.type:
             self.progress.update(self.bar, description="done")

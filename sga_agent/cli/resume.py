@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import click
 
+from sga_agent import registry
 from sga_agent.cli import main
-from sga_agent.cli.search import check_executor, execute, make_proposer
+from sga_agent.cli.search import check_executor, execute, prepare
 from sga_agent.config import ConfigError
 from sga_agent.events import RunResumed
 from sga_agent.run_store import RunFolderFull, RunLocked, RunStore, RunStoreError
@@ -29,24 +29,32 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     """
     try:
         store = RunStore.open(run_dir)
-        config = store.config()
+        name = store.config_record()["task"]
     except RunStoreError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
     try:
         store.lock()  # before anything is written: two resumes never interleave
     except RunLocked as error:
         raise click.ClickException(str(error)) from error
+    try:
+        loaded = registry.load_task(name)  # this process's one load of its task
+    except registry.UnknownTaskError as error:
+        raise click.ClickException(f"the run's task is not installed here: {error}") from error
+    try:
+        config = store.config(loaded.options_type)
+    except ConfigError as error:
+        raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
     if ray_address is not None:
         try:
-            config = dataclasses.replace(config, ray_address=ray_address)
+            config = config.replace(ray_address=ray_address)
         except ConfigError as error:
             raise click.UsageError(str(error)) from error
     check_executor(config)
-    proposer = make_proposer(config)
+    task, proposer = prepare(config, loaded)
     if store.recorded().finished:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
     try:
         store.append(RunResumed(ray_address))
-        execute(config, store, as_json, proposer)
-    except RunFolderFull as error:  # the disk is full: stop with what to do
+        execute(config, store, as_json, proposer, task)
+    except RunFolderFull as error:  # the disk is full: the message says what to do
         raise click.ClickException(str(error)) from error

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import dataclasses
 import shutil
 from pathlib import Path
-from typing import Any
 
 import click
 from rich.console import Console
@@ -15,20 +13,12 @@ from sga_agent.cli import main
 from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
 from sga_agent.cli.options import registered_task, task_options, typed_task_options
 from sga_agent.cli.progress import SearchProgress, print_result
-from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig
-from sga_agent.proposers.base import ProposerError
+from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig, default
+from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunFolderFull, RunStore, RunStoreError
-from sga_agent.task import configured
-
-
-def default(name: str) -> Any:
-    """The default of a :class:`SearchConfig` field (the CLI's defaults are the config's)."""
-    found = SearchConfig.__dataclass_fields__[name]
-    if found.default_factory is not dataclasses.MISSING:
-        return found.default_factory()
-    return found.default
+from sga_agent.task import TaskBase, configured
 
 
 class SearchCommand(click.Command):
@@ -134,7 +124,9 @@ def from_preset(name: str) -> str:
               help="Folder in which the run folder (TASK-DATE-TIME) is made.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
 # fmt: on
-def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings) -> None:
+def search(
+    model, api_base, replay, preset, no_bilevel, out, as_json, task, task_options, **settings
+) -> None:
     """Search TASK's solutions with a model and differentiable simulation.
 
     Each iteration shows the model the top-K solutions with their feedback, asks for
@@ -147,14 +139,14 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
     builtin = not model and not replay
     if builtin:
         model = runner.BUILTIN
-    task = registry.load_task(settings["task"])
-    settings["task_options"] = typed_task_options(task, settings["task_options"])
     proposer = model if model else f"{runner.REPLAY_PREFIX}{replay.resolve()}"
+    loaded = registry.load_task(task)  # this process's one load of its task
+    options = typed_task_options(loaded, task_options, proposer)
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
     try:
         config = SearchConfig.from_preset(
-            preset, proposer=proposer, api_base=api_base,
+            preset, task=task, proposer=proposer, api_base=api_base, task_options=options,
             bilevel=False if no_bilevel else None, **settings,
         )  # fmt: skip
         if replay:
@@ -162,31 +154,31 @@ def search(model, api_base, replay, preset, no_bilevel, out, as_json, **settings
     except (ConfigError, RunStoreError) as error:
         raise click.UsageError(str(error)) from error
     check_executor(config)
-    chosen = make_proposer(config)
+    set_up, chosen = prepare(config, loaded)
     if builtin:  # after every usage error
         click.echo(
             "no --model: the task's built-in LLM-free proposer searches (preset quick); "
             "--model openai/gpt-4o (with OPENAI_API_KEY set) searches with an LLM",
             err=True,
         )
-    config = runner.with_preferred_options(config, chosen)
     store = RunStore.create(out, config, {"proposer": proposer})
-    execute(config, store, as_json, chosen, new_run=True)
+    execute(config, store, as_json, chosen, set_up, new_run=True)
 
 
 def check_executor(config: SearchConfig) -> None:
     """The ray executor without Ray installed is a usage error, before anything starts."""
-    if config.executor == "ray":
+    if config.executor.kind == "ray":
         try:
             import_ray()
         except RayUnavailableError as error:
             raise click.UsageError(str(error)) from error
 
 
-def make_proposer(config: SearchConfig):
-    """The run's proposer; a bad choice is a usage error, a missing API key an error."""
+def prepare(config: SearchConfig, loaded: TaskBase) -> tuple[TaskBase, Proposer]:
+    """The run's task (``loaded``) set up for its options, and its proposer; a bad choice of
+    proposer is a usage error, a missing API key an error."""
     try:
-        task = configured(registry.load_task(config.task), config.task_options)
+        task = configured(loaded, config.task_options)
         proposer = runner.make_proposer(config, task)
     except ValueError as error:  # unknown built-in, malformed model string
         raise click.UsageError(str(error)) from error
@@ -195,14 +187,20 @@ def make_proposer(config: SearchConfig):
             proposer.check_keys()
         except ProposerError as error:
             raise click.ClickException(str(error)) from error
-    return proposer
+    return task, proposer
 
 
 def execute(
-    config: SearchConfig, store: RunStore, as_json: bool, proposer, new_run: bool = False
+    config: SearchConfig,
+    store: RunStore,
+    as_json: bool,
+    proposer: Proposer,
+    task: TaskBase,
+    new_run: bool = False,
 ) -> None:
-    """Run with a progress display, then print the result. A ``new_run`` whose cluster
-    cannot be reached before anything was evaluated leaves no run folder behind."""
+    """Run ``task`` (set up for the run's options) with a progress display, then print the
+    result. A ``new_run`` whose cluster cannot be reached before anything was evaluated
+    leaves no run folder behind."""
     console = Console(stderr=as_json, highlight=False)
     if not as_json:
         console.print(f"run folder: {store.path}", soft_wrap=True)
@@ -213,7 +211,7 @@ def execute(
             interrupts_stop_the_search(),
             SearchProgress(console, config, recorded) as progress,
         ):
-            result = runner.run(config, store, progress, proposer)
+            result = runner.run(config, store, progress, proposer, task)
     except RayUnavailableError as error:  # no cluster: stop
         if new_run and not store.recorded().evaluations:  # it never started
             store.unlock()
@@ -228,5 +226,4 @@ def execute(
         finished = len(store.recorded().evaluations)
         click.echo(f"interrupted: {finished} finished evaluations are recorded; {resume}", err=True)
         raise SystemExit(INTERRUPTED) from None
-    task = registry.load_task(config.task)
     print_result(console, store, result, as_json, task, config)

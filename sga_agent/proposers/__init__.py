@@ -11,7 +11,6 @@ from sga_agent.proposers.base import (
     ProposalRequest,
     Proposer,
     ProposerError,
-    describe_proposer,
 )
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.proposers.litellm_backbone import (
@@ -31,5 +30,4 @@ __all__ = [
     "Proposer",
     "ProposerError",
     "ReplayProposer",
-    "describe_proposer",
 ]

@@ -132,9 +132,3 @@ class Proposer(Protocol):
         ...
 
     def propose(self, request: ProposalRequest) -> list[Proposal]: ...
-
-
-def describe_proposer(proposer: Proposer) -> dict[str, Any]:
-    """The proposer's settings for the run config (no secrets): its ``describe()`` if it has one."""
-    describe = getattr(proposer, "describe", None)
-    return describe() if callable(describe) else {"name": proposer.name}

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from sga_agent.proposers.base import Proposal, ProposalRequest
 from sga_agent.task import BuiltinProposer
 
@@ -24,11 +22,6 @@ class BuiltinAdapter:
     @property
     def name(self) -> str:
         return self.builtin.name
-
-    @property
-    def task_options(self) -> dict[str, Any]:
-        """The task options the built-in proposer is meant to run with (may be empty)."""
-        return dict(getattr(self.builtin, "task_options", {}) or {})
 
     def propose(self, request: ProposalRequest) -> list[Proposal]:
         texts = self.builtin.propose_from(

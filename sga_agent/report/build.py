@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+from sga_agent.config import flat_settings
 from sga_agent.registry import load_task
 from sga_agent.report import plots
 from sga_agent.report.data import Run, read_run
@@ -95,7 +96,7 @@ def outcomes_table(run: Run) -> Table:
 
 def records_sections(run: Run, findings: Findings) -> list[Section]:
     """The folded records at the end: settings, isolation, the best solution's feedback."""
-    config = run.config
+    config = flat_settings(run.config)
     settings = [[key, json.dumps(config.get(key))] for key in (
         "proposer", "preset", "iterations", "exploit", "explore", "top_k", "bilevel", "epochs",
         "workers", "seed", "task_options",
@@ -143,7 +144,7 @@ def build_report(
     task = load_or_none(run.task)
     if task is not None and run.best is not None and task.describe_assessment(motion):
         say(task.describe_assessment(motion))
-    findings = find(run, task, simulate=motion)
+    findings = find(run, task, simulate=motion)  # the options: the run's, typed by the task
     label = task.loss_label if task is not None else "loss"
     top = distinct(run, task)
     view = ReportView(run.task, findings.best, top, findings.assessment, folder, motion, say)

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sga_agent.config import current_format
 from sga_agent.events import CandidateEvaluated, ProposalReceived, SandboxReady
 from sga_agent.run_store import CONFIG, SUMMARY, RunStore
 
@@ -114,7 +115,7 @@ def read_run(path: Path) -> Run:
     candidates = [c for c in map(read_candidate, folders) if c is not None]
     run = Run(
         path=store.path,
-        config=_read_json(store.path / CONFIG, {}).get("config", {}),
+        config=current_format(_read_json(store.path / CONFIG, {}).get("config", {})),
         candidates=candidates,
         summary=_read_json(store.path / SUMMARY, None),
     )

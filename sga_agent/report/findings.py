@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sga_agent.fingerprint import fingerprint
+from sga_agent.options import options_from_data
 from sga_agent.report.data import Candidate, Run
 from sga_agent.run_store import SEED
 from sga_agent.task import Assessment, Task, as_task, solution_with_parameters
@@ -108,8 +109,9 @@ def distinct(run: Run, task: Task | None, count: int = TOP) -> list[Candidate]:
     return found
 
 
-def find(run: Run, task: Task | None, simulate: bool = True) -> Findings:
+def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True) -> Findings:
     """The findings of ``run``; ``task`` (None when it cannot be loaded) adds what it knows,
+    given the run's ``options`` (its options object; None: built from the run's config),
     ``simulate`` allows its free run. A failing assessment is recorded, not raised."""
     best = run.best
     seed = next((c for c in run.candidates if c.id == SEED), None)
@@ -124,8 +126,10 @@ def find(run: Run, task: Task | None, simulate: bool = True) -> Findings:
         return findings
     task = as_task(task)
     if best is not None:
-        options = dict(run.config.get("task_options") or {})
         try:
+            if options is None:
+                recorded = run.config.get("task_options") or {}
+                options = options_from_data(task.options_type, recorded, task.name)
             findings.assessment = task.assess(best.artifacts(), best.parameters, options, simulate)
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"

@@ -8,7 +8,8 @@ protocol package :mod:`sga_agent.task`).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from types import MappingProxyType
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from sga_agent.task.records import (
@@ -67,8 +68,8 @@ class BuiltinProposer(Protocol):
     new solutions, each an answer text holding one ```python block. ``temperature`` is the
     search's exploit (low) or explore (high) temperature: low means small changes to good
     parents, high means bolder ones. Everything random derives from ``seed``, so a call with
-    the same arguments returns the same answers. An optional attribute ``task_options`` (a
-    dict) names the task options it is meant to run with (options a run sets win).
+    the same arguments returns the same answers. The task options it is meant to run with are
+    the task's :attr:`TaskBase.builtin_options`.
     """
 
     name: str
@@ -92,9 +93,14 @@ class TaskBase:
 
     #: The options' dataclass: fields with defaults typed ``int``, ``float``, ``bool``, ``str``
     #: or a ``Literal`` of strings (optionally ``| None``), whose ``__post_init__`` raises
-    #: ``ValueError`` for a bad value. ``--option KEY=VALUE`` is checked against it before
-    #: anything runs; ``EvaluationSettings.options`` then holds the given options, typed.
+    #: ``ValueError`` for a bad value. ``--option KEY=VALUE`` is read into one object of it
+    #: before anything runs; that object is what ``EvaluationSettings.options``,
+    #: :meth:`with_options`, :meth:`warm_up_fit` and :meth:`assess` are given (in a fit worker,
+    #: built again once from its JSON: its values must survive JSON).
     options_type: ClassVar[type] = NoOptions
+    #: Options a run whose proposer is this task's built-in one uses unless it sets them
+    #: itself, as ``--option`` texts (``{"optimizer": "lbfgs"}``). Default: none.
+    builtin_options: ClassVar[Mapping[str, str]] = MappingProxyType({})
     #: Modules the capture server imports once, before it confines any capture (torch, the
     #: task's own capture module): a confined capture may be unable to import them.
     capture_modules: ClassVar[tuple[str, ...]] = ()
@@ -118,10 +124,10 @@ class TaskBase:
         of a search, reports); it must not run the solution's code. Default: unchanged."""
         return solution
 
-    def with_options(self, options: dict[str, Any]) -> TaskBase:
-        """The task set up for a run's ``options`` (typed, as ``EvaluationSettings.options``
-        holds them) where its seed, prompt or built-in proposer depend on them (a task whose
-        data is a file named by an option). Default: the task itself."""
+    def with_options(self, options: Any) -> TaskBase:
+        """The task set up for a run's ``options`` (an :attr:`options_type` object) where its
+        seed, prompt or built-in proposer depend on them (a task whose data is a file named by
+        an option). Default: the task itself."""
         return self
 
     def builtin_proposer(self) -> BuiltinProposer | None:
@@ -135,11 +141,12 @@ class TaskBase:
         everything loaded. Default: the seed."""
         return [self.seed_solution()]
 
-    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None] | None:
-        """Run by a fit worker once it is ready, with the options its evaluations will use:
-        load data, compile kernels; it runs no candidate code. An iterator (a generator
-        yielding between stages) is run in stages, the most needed first, none starting while
-        a candidate waits (see :mod:`sga_agent.fit_worker`). Default: nothing to warm."""
+    def warm_up_fit(self, options: Any) -> Iterator[None] | None:
+        """Run by a fit worker once it is ready, with the options (an :attr:`options_type`
+        object) its evaluations will use: load data, compile kernels; it runs no candidate
+        code. An iterator (a generator yielding between stages) is run in stages, the most
+        needed first, none starting while a candidate waits (see :mod:`sga_agent.fit_worker`).
+        Default: nothing to warm."""
         return None
 
     # ------------------------------------------------------------------ findings
@@ -148,14 +155,14 @@ class TaskBase:
         self,
         artifacts: dict[str, Any] | None,
         parameters: dict[str, float],
-        options: dict[str, Any],
+        options: Any,
         simulate: bool,
     ) -> Assessment | None:
         """What only the task knows about a run's best solution, given the artifacts its
         evaluation left (the captured data included), its fitted parameters and the run's task
-        options: the ground truth's name and loss, readable derived values and (if
-        ``simulate``) a free run. Trusted code: it must not load or run the solution's code,
-        only what the capture recorded. Default: None, nothing to add."""
+        options (an :attr:`options_type` object): the ground truth's name and loss, readable
+        derived values and (if ``simulate``) a free run. Trusted code: it must not load or run
+        the solution's code, only what the capture recorded. Default: None, nothing to add."""
         return None
 
     def describe_assessment(self, simulate: bool) -> str:
@@ -236,6 +243,6 @@ def solution_with_parameters(task: Task | None, solution: str, parameters: dict[
     return as_task(task).solution_with_parameters(solution, parameters)
 
 
-def configured(task: Task, options: dict[str, Any]) -> TaskBase:
+def configured(task: Task, options: Any) -> TaskBase:
     """``task`` set up for ``options`` (:meth:`TaskBase.with_options`)."""
     return as_task(as_task(task).with_options(options))

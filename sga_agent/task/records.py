@@ -10,9 +10,10 @@ import json
 import math
 import re
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 TaskKind = Literal["equation", "entity"]
+_Options = TypeVar("_Options")
 #: Outcome of an evaluation: scored, or why not (invalid code, an exception, NaN/inf, a limit).
 STATUSES = ("ok", "invalid", "error", "unstable", "timeout", "out_of_memory", "crashed")
 
@@ -29,20 +30,39 @@ class EvaluationSettings:
         Step size of the inner optimizer; ``None`` uses the task's default.
     seed : int
         Seed for any randomness of the evaluation.
-    options : dict
-        Task-specific settings: fields of the task's ``options_type`` (see :class:`Task`).
+    options : object, optional
+        The task's options: an object of its ``options_type`` (see :class:`Task`), as the
+        search and its fit workers always pass them; ``None`` (a direct call) for their
+        defaults. A task reads them with :meth:`options_as`.
     """
 
     epochs: int | None = None
     learning_rate: float | None = None
     seed: int = 0
-    options: dict[str, Any] = field(default_factory=dict)
+    options: Any = None
 
     def __post_init__(self) -> None:
         if self.epochs is not None and (not isinstance(self.epochs, int) or self.epochs < 0):
             raise ValueError(f"epochs must be a non-negative integer or None, got {self.epochs!r}")
         if self.learning_rate is not None and not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+
+    def options_as(self, options_type: type[_Options]) -> _Options:
+        """The options as an ``options_type`` object: themselves, or its defaults for None.
+
+        Raises
+        ------
+        TypeError
+            The options are of another type (a dict of them, say: build the dataclass).
+        """
+        if self.options is None:
+            return options_type()
+        if not isinstance(self.options, options_type):
+            raise TypeError(
+                f"settings.options must be a {options_type.__name__} (or None for its "
+                f"defaults), got {type(self.options).__name__}"
+            )
+        return self.options
 
 
 #: How native libraries (torch's allocator, Taichi) report a failed allocation.

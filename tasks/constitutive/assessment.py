@@ -270,17 +270,16 @@ def assess(
     spec: ConstitutiveSpec,
     artifacts: dict[str, Any] | None,
     parameters: dict[str, float],
-    options: dict[str, Any],
+    options: ConstitutiveOptions,
     simulate: bool,
 ) -> Assessment:
     """The ground truth's name and loss, the best law's readable values and its free run."""
-    typed = ConstitutiveOptions(**options)
-    check_precision(typed.precision)
+    check_precision(options.precision)
     graph = ((artifacts or {}).get("captured") or {}).get("law")
-    found = Assessment(truth=truth_name(spec), truth_loss=truth_loss(spec, typed))
+    found = Assessment(truth=truth_name(spec), truth_loss=truth_loss(spec, options))
     if graph is None:
         return found
     found.derived = derived_values(graph, parameters)
     if simulate:
-        found.free_run = free_run(spec, graph, parameters, typed)
+        found.free_run = free_run(spec, graph, parameters, options)
     return found

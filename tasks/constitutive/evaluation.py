@@ -149,11 +149,11 @@ def fit(
 def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) -> Evaluation:
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
-    Invalid results carry a reason. ``settings.options`` holds fields of
-    :class:`~tasks.constitutive.options.ConstitutiveOptions`.
+    Invalid results carry a reason. ``settings.options`` is a
+    :class:`~tasks.constitutive.options.ConstitutiveOptions` (None: its defaults).
     """
     started = time.perf_counter()
-    options = ConstitutiveOptions(**settings.options)
+    options = settings.options_as(ConstitutiveOptions)
     check_precision(options.precision)
     ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()

@@ -8,6 +8,7 @@ graph (in the trusted fit worker, which never runs the law's code).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from types import MappingProxyType
 from typing import Any
 
 from sga_agent.task import (
@@ -31,6 +32,10 @@ class ConstitutiveTask(TaskBase):
 
     kind = "equation"
     options_type = ConstitutiveOptions
+    #: The built-in genetic programming's runs fit constants by L-BFGS, as symbolic-regression
+    #: tools fit theirs with quasi-Newton steps (with Adam's few small steps at a short budget, a
+    #: child's constants barely move; ``--option optimizer=adam`` restores it).
+    builtin_options = MappingProxyType({"optimizer": "lbfgs"})
     loss_label = report.LOSS_LABEL
     #: Whether the report draws the observation beside the best law's free run.
     draws_motion = True
@@ -67,11 +72,11 @@ class ConstitutiveTask(TaskBase):
 
         return [self.spec.seed, WARM_UP_LAW]
 
-    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+    def warm_up_fit(self, options: ConstitutiveOptions) -> Iterator[None]:
         """Ground truth and every kernel an evaluation launches, loaded in stages."""
         from tasks.constitutive.evaluation import warm_up
 
-        return warm_up(self.spec, ConstitutiveOptions(**options))
+        return warm_up(self.spec, options)
 
     def check_solution(self, code: str) -> None:
         """One class Physics(nn.Module), defaulted __init__, forward(self, F) (nothing is run)."""
@@ -102,7 +107,7 @@ class ConstitutiveTask(TaskBase):
         self,
         artifacts: dict[str, Any] | None,
         parameters: dict[str, float],
-        options: dict[str, Any],
+        options: ConstitutiveOptions,
         simulate: bool,
     ) -> Assessment:
         """The ground truth's name and loss, the best law's derived values (``exp(log_E)``) and

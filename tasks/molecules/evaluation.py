@@ -18,7 +18,7 @@ from tasks.molecules.xtb import XtbError
 
 def objective_for(prop: str, target: float, settings: EvaluationSettings) -> Objective:
     """The inner-loop objective of a task under ``settings`` (option ``strain_weight``)."""
-    weight = MoleculeOptions(**settings.options).strain_weight
+    weight = settings.options_as(MoleculeOptions).strain_weight
     return Objective(prop=prop, target=target, strain_weight=float(weight))
 
 

@@ -64,26 +64,25 @@ def trajectory(data: ObservedData) -> Trajectory:
     return Trajectory(positions, np.zeros(0, dtype=np.int64), None, weights)
 
 
-def setup(options: dict[str, Any]) -> tuple[ObservedOptions, ObservedData, torch.dtype]:
-    """Typed options, the data and the dtype of a Taichi started in their precision."""
-    typed = ObservedOptions(**options)
-    check_precision(typed.precision)
-    ensure_runtime(typed.precision or "float32")
-    return typed, ObservedData.load(typed.observation, typed.frames), torch_dtype()
+def setup(options: ObservedOptions) -> tuple[ObservedData, torch.dtype]:
+    """The data and the dtype of a Taichi started in the options' precision."""
+    check_precision(options.precision)
+    ensure_runtime(options.precision or "float32")
+    return ObservedData.load(options.observation, options.frames), torch_dtype()
 
 
-def warm_up(options: dict[str, Any]) -> Iterator[None]:
+def warm_up(options: ObservedOptions) -> Iterator[None]:
     """Two warm-up stages (see :mod:`sga_agent.fit_worker`): the kernels of a checkpointed
     forward and backward pass (two 1-step segments with a von Mises law), then the inner
     optimizer and the batched products, so that evaluations do not pay for them."""
-    typed, data, dtype = setup(options)
+    data, dtype = setup(options)
     elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
     plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
     positions, weights = data.dense()
     trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
                     weights=np.ones_like(weights[:3]))  # fmt: skip
     yield
-    warm_up_fitting(dtype, typed.optimizer or "adam")
+    warm_up_fitting(dtype, options.optimizer or "adam")
 
 
 def loss_text(data: ObservedData) -> str:
@@ -93,9 +92,11 @@ def loss_text(data: ObservedData) -> str:
 
 def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
     """Fit the captured law ``data`` (``{"law": graph}``) to the observation named in
-    ``settings.options``; the artifact ``trajectory`` holds the best epoch's positions."""
+    ``settings.options`` (an :class:`~tasks.observed.options.ObservedOptions`); the artifact
+    ``trajectory`` holds the best epoch's positions."""
     started = time.perf_counter()
-    options, observed, dtype = setup(settings.options)
+    options = settings.options_as(ObservedOptions)
+    observed, dtype = setup(options)
     try:
         law = build_law(data.get("law") if isinstance(data, dict) else None, dtype)
     except LawGraphError as error:
@@ -138,14 +139,14 @@ def _xyz(point: np.ndarray) -> str:
 
 
 def assess(
-    artifacts: dict[str, Any] | None, parameters: dict[str, float], options: dict[str, Any],
+    artifacts: dict[str, Any] | None, parameters: dict[str, float], options: ObservedOptions,
     simulate: bool,
 ) -> Assessment:
     """The hidden truth (from the file beside the observation, if any) with its loss scored
     like a candidate's without fitting, the best law's readable values and its free run."""
-    typed, data, dtype = setup(options)
+    data, dtype = setup(options)
     found = Assessment()
-    truth = read_truth(typed.observation)
+    truth = read_truth(options.observation)
     if truth is not None:
         values = ", ".join(f"{k} = {v:g}" for k, v in truth["parameters"].items())
         found.truth = f"{FAMILIES[truth['family']]}; {values} (hidden from the search)"
@@ -153,14 +154,14 @@ def assess(
         plastic, elastic = torch_laws.from_material(material, dtype)
         rollout = Rollout(data.scene, plastic.requires_grad_(False), elastic.requires_grad_(False))
         observed = trajectory(data)
-        found.truth_loss = trajectory_loss(rollout, observed.positions, None, typed.segment,
+        found.truth_loss = trajectory_loss(rollout, observed.positions, None, options.segment,
                                            backward=False, weights=observed.weights).loss
     graph = ((artifacts or {}).get("captured") or {}).get("law")
     if graph is None:
         return found
     found.derived = derived_values(graph, parameters)
     if simulate:
-        found.free_run = free_run(fitted_law(graph, parameters, dtype), data, typed, dtype)
+        found.free_run = free_run(fitted_law(graph, parameters, dtype), data, options, dtype)
     return found
 
 

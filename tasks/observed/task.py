@@ -35,8 +35,8 @@ class ObservedTask(ConstitutiveTask):
         self.description = ("a constitutive law (elastic or plastic part) discovered from your "
                             "own observation file (taichi_mpm.sysid format)")  # fmt: skip
 
-    def with_options(self, options: dict[str, Any]) -> ObservedTask:
-        return ObservedTask(ObservedOptions(**options))
+    def with_options(self, options: ObservedOptions) -> ObservedTask:
+        return ObservedTask(options)
 
     def configured_options(self) -> ObservedOptions:
         """The options this task was set up with; a ``ValueError`` if none were given."""
@@ -68,7 +68,7 @@ class ObservedTask(ConstitutiveTask):
 
         return [prompt_text.ELASTIC_SEED, prompt_text.PLASTIC_SEED, WARM_UP_LAW]
 
-    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+    def warm_up_fit(self, options: ObservedOptions) -> Iterator[None]:
         from tasks.observed.evaluation import warm_up
 
         return warm_up(options)
@@ -82,7 +82,7 @@ class ObservedTask(ConstitutiveTask):
         self,
         artifacts: dict[str, Any] | None,
         parameters: dict[str, float],
-        options: dict[str, Any],
+        options: ObservedOptions,
         simulate: bool,
     ) -> Assessment:
         """The hidden truth beside the observation (if written there) and its loss, the best

@@ -163,7 +163,7 @@ def test_presets_grid_runs_each_preset_with_one_proposer(tmp_path, registered):
     assert result.returncode == 0, result.stderr
     assert "| task | seeds | quick | cot |" in (out / "table.md").read_text()
     configs = [json.loads(p.read_text())["config"] for p in sorted(out.glob("*/*/*/*/config.json"))]
-    assert [(c["preset"], c["explore"], c["iterations"]) for c in configs] == [
+    assert [(c["preset"], c["loop"]["explore"], c["loop"]["iterations"]) for c in configs] == [
         ("cot", 0, 1), ("quick", 4, 1),
     ]  # fmt: skip
 
@@ -217,7 +217,7 @@ def test_methods_override_the_shared_settings(tmp_path, registered):
     methods = [Method("long", "builtin", "quick"), Method("short", "builtin", "quick",
                                                            {"iterations": 1})]  # fmt: skip
     cells = plan_cells(["number-a", "number-b"], methods, [3], tmp_path, {"iterations": 2})
-    assert [(c.name, c.config.iterations, c.config.seed) for c in cells] == [
+    assert [(c.name, c.config.loop.iterations, c.config.seed) for c in cells] == [
         ("number-a/long/seed-3", 2, 3), ("number-a/short/seed-3", 1, 3),
         ("number-b/long/seed-3", 2, 3), ("number-b/short/seed-3", 1, 3),
     ]  # fmt: skip

@@ -15,6 +15,7 @@ import pytest
 from sga_agent.registry import load_task
 from sga_agent.sandbox import SandboxLimits, _LineProcess, worker_environment
 from sga_agent.task import EvaluationSettings
+from tasks.constitutive.options import ConstitutiveOptions
 from tests.hostile.catalog import load_catalog
 from tests.sga_agent.test_sandbox import ISOLATED
 from tests.tasks.constitutive.test_law_cost import assert_refused_quickly
@@ -75,7 +76,8 @@ def test_the_task_evaluation_refuses_the_gigabyte_law_quickly(captured):
     [name] = [c.name for c in COST if c.name.startswith("75_")]
     task = load_task("granular")
     started = time.perf_counter()
-    evaluation = task.evaluate(captured[name], EvaluationSettings(epochs=1, options={"steps": 20}))
+    settings = EvaluationSettings(epochs=1, options=ConstitutiveOptions(steps=20))
+    evaluation = task.evaluate(captured[name], settings)
     seconds = time.perf_counter() - started
     print(f"{name}: evaluate refused it in {seconds:.2f} s")
     assert seconds < 5.0

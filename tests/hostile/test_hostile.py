@@ -26,8 +26,10 @@ import pytest
 from click.testing import CliRunner
 
 from sga_agent.cli import main
+from sga_agent.helper_protocol import FitSettings
 from sga_agent.sandbox import SandboxLimits, SandboxPool, _LineProcess, worker_environment
 from sga_agent.task import EvaluationSettings
+from tasks.constitutive.options import ConstitutiveOptions
 from tests.hostile.catalog import load_catalog
 from tests.sga_agent.test_sandbox import ISOLATED, nobody_processes
 
@@ -37,7 +39,8 @@ pytestmark = [
 ]
 
 CATALOG = load_catalog()
-SETTINGS = EvaluationSettings(epochs=1, options={"steps": 20})
+SETTINGS = EvaluationSettings(epochs=1, options=ConstitutiveOptions(steps=20))
+SENT = FitSettings.of(SETTINGS)  # as a slot sends them to its fit worker
 LIMITS = SandboxLimits(timeout_s=300, capture_timeout_s=10, memory_mb=2048)
 MARKER = "SGA-HOSTILE-MARKER-7f3a"
 SECRET = Path("/root/.sga-hostile-secret")
@@ -102,12 +105,12 @@ class Refitter:
     def __call__(self, task: str, data: dict) -> float:
         """The loss a trusted fit worker (not the one that scored it) gives for ``data``."""
         if task not in self.workers:
-            command = [sys.executable, "-m", "sga_agent.fit_worker", task, "4096"]
+            command = [sys.executable, "-m", "sga_agent.fit_worker", task, "4096", SENT.options]
             worker = _LineProcess(command, worker_environment(LIMITS), self.folder, task)
             worker.ask(None, 600)
             self.workers[task] = worker
-        settings = json.loads(json.dumps(vars(SETTINGS)))
-        return float(self.workers[task].ask({"data": data, "settings": settings}, 600)["loss"])
+        request = {"data": data, "settings": SENT.request()}
+        return float(self.workers[task].ask(request, 600)["loss"])
 
     def close(self) -> None:
         for worker in self.workers.values():
@@ -174,7 +177,6 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
     from sga_agent.run_store import RunStore
     from sga_agent.search import Search
     from tasks.constitutive.assessment import truth_loss
-    from tasks.constitutive.options import ConstitutiveOptions
     from tasks.constitutive.specs import SPECS
     from tests.sga_agent.test_search import Scripted
 
@@ -182,15 +184,15 @@ def test_a_search_driven_by_hostile_answers_ranks_honest_scores(tmp_path, refit)
     truth = (Path(__file__).parents[2] / "examples" / "laws" / "drucker_prager.py").read_text()
     answers = [f"### Code\n```python\n{code}```\n" for code in [truth] + [c.code for c in hostile]]
     explore = 6
-    cfg = SearchConfig(
+    cfg = SearchConfig.from_settings(
         task="granular", proposer="scripted", iterations=-(-len(answers) // (explore + 1)),
         top_k=3, exploit=1, explore=explore, workers=2, epochs=1,
-        task_options={"steps": 20}, timeout_s=300.0, memory_mb=2048,
+        task_options=SETTINGS.options, timeout_s=300.0, memory_mb=2048,
     )  # fmt: skip
     store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
     # the summary's findings score the true law in this process (trusted code) and cache it:
     # cached here first, so that any change below would be the candidates' doing
-    truth_loss(SPECS["granular"], ConstitutiveOptions(**cfg.task_options))
+    truth_loss(SPECS["granular"], cfg.task_options)
     before = cache_digests()
     limits = SandboxLimits(timeout_s=300.0, capture_timeout_s=10, memory_mb=2048)
     with SandboxPool(2, limits) as pool:

@@ -11,11 +11,20 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+
+
+@dataclass(frozen=True)
+class DoubleOptions:
+    """The doubles' options: ``label``, any text, reported back with the settings; ``notes``,
+    the file :class:`StagedWarmingTask` notes its warm-up stages in."""
+
+    label: str = ""
+    notes: str | None = None
 
 
 class ExecTask:
@@ -24,6 +33,7 @@ class ExecTask:
     name = "exec-double"
     description = "Executes the candidate and reports what it defined (a test double)."
     kind = "equation"
+    options_type = DoubleOptions
 
     def seed_solution(self) -> str:
         return "loss = 1.0\nparameters = {'E': 2.0}\n"
@@ -62,12 +72,12 @@ class ExecTask:
 
 class WarmingTask(ExecTask):
     """:class:`ExecTask` whose fit worker warms up first; its evaluations report the options
-    the warm-up was given and the fit worker's process id."""
+    the warm-up was given (their type's name and fields) and the fit worker's process id."""
 
     warmed_with: dict[str, Any] | None = None
 
-    def warm_up_fit(self, options: dict[str, Any]) -> None:
-        WarmingTask.warmed_with = options
+    def warm_up_fit(self, options: DoubleOptions) -> None:
+        WarmingTask.warmed_with = {"type": type(options).__name__, **asdict(options)}
 
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         evaluation = super().evaluate(data, settings)
@@ -79,8 +89,8 @@ class StagedWarmingTask(ExecTask):
     """:class:`ExecTask` whose fit warm-up comes in three stages, each noted as it runs in the
     file named by the option ``notes``; its evaluations report the stages run before them."""
 
-    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
-        notes = Path(options["notes"])
+    def warm_up_fit(self, options: DoubleOptions) -> Iterator[None]:
+        notes = Path(options.notes)
         for stage in ("1", "2", "3"):
             with notes.open("a", encoding="utf-8") as file:
                 file.write(stage + "\n")
@@ -88,7 +98,7 @@ class StagedWarmingTask(ExecTask):
 
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         evaluation = super().evaluate(data, settings)
-        notes = Path(settings.options["notes"])
+        notes = Path(settings.options.notes)
         evaluation.extras["stages_done"] = notes.read_text().split() if notes.exists() else []
         return evaluation
 
@@ -96,7 +106,7 @@ class StagedWarmingTask(ExecTask):
 class FailingWarmUpTask(ExecTask):
     """:class:`ExecTask` whose fit warm-up raises."""
 
-    def warm_up_fit(self, options: dict[str, Any]) -> None:
+    def warm_up_fit(self, options: DoubleOptions) -> None:
         raise RuntimeError("no data to load")
 
 
@@ -154,7 +164,7 @@ class HealthTask(ExecTask):
         time.sleep(float(report.get("capture_sleep", 0)))
         return data
 
-    def warm_up_fit(self, options: dict[str, Any]) -> Iterator[None]:
+    def warm_up_fit(self, options: DoubleOptions) -> Iterator[None]:
         for _ in range(3):
             time.sleep(0.05)
             HealthTask.warm_stages += 1

@@ -219,7 +219,7 @@ def test_usage_errors_come_before_the_no_model_banner(tmp_path, args):
 
 def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):
     """Resumed after its seed was evaluated, the search asks the model: nothing listens."""
-    config = SearchConfig(
+    config = SearchConfig.from_settings(
         task="granular", proposer="hosted_vllm/some-model", api_base=closed_port_url(),
         iterations=3, exploit=1, explore=1, workers=1,
     )  # fmt: skip
@@ -243,12 +243,12 @@ def test_extract_solution_takes_the_last_python_block():
 
 
 def test_search_help_writes_every_default_one_way():
-    """Defaults read "[default: ...]", from SearchConfig and the presets, never "[0.5]"."""
-    from sga_agent.config import PRESETS, SearchConfig
+    """Defaults read "[default: ...]", from the config and the presets, never "[0.5]"."""
+    from sga_agent.config import PRESETS, SandboxConfig
 
     help_text = CliRunner().invoke(main, ["search", "--help"], terminal_width=400).output
     assert "Default:" not in help_text and not re.search(r"\[\d", help_text)
-    assert f"[default: {SearchConfig.timeout_s}; x>=1]" in help_text
+    assert f"[default: {SandboxConfig.timeout_s}; x>=1]" in help_text
     iterations = f"{PRESETS['sga']['iterations']} (sga), {PRESETS['quick']['iterations']} (quick)"
     assert f"Outer iterations.  [default: ({iterations}); x>=1]" in help_text
     assert "--out-dir DIRECTORY" in help_text and "--out " not in help_text

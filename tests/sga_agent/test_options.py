@@ -1,8 +1,10 @@
-"""Task options: text checked and typed against the task's options dataclass, and the CLI's
-usage errors (exit 2, before anything is evaluated) for unknown keys and bad values."""
+"""Task options: text read once into the task's options dataclass, its one serialisation and
+the reading back, and the CLI's usage errors (exit 2, before anything is evaluated) for
+unknown keys and bad values."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Literal
 
@@ -10,7 +12,14 @@ import pytest
 from click.testing import CliRunner
 
 from sga_agent.cli import main
-from sga_agent.options import OptionError, describe_options, parse_options
+from sga_agent.options import (
+    OptionError,
+    describe_options,
+    options_data,
+    options_from_data,
+    options_json,
+    parse_options,
+)
 from sga_agent.task import NoOptions
 
 
@@ -27,12 +36,10 @@ class Options:
             raise ValueError(f"option 'steps' must be at least 1, got {self.steps}")
 
 
-def test_values_are_typed_by_their_fields_and_only_given_keys_are_kept():
+def test_values_are_typed_by_their_fields_into_the_options_object():
     raw = {"steps": "200", "weight": "1e-2", "optimizer": "lbfgs", "verbose": "yes", "label": "x"}
-    assert parse_options(Options, raw, "t") == {
-        "steps": 200, "weight": 0.01, "optimizer": "lbfgs", "verbose": True, "label": "x",
-    }  # fmt: skip
-    assert parse_options(Options, {"weight": "2"}, "t") == {"weight": 2.0}
+    assert parse_options(Options, raw, "t") == Options(200, 0.01, "lbfgs", True, "x")
+    assert parse_options(Options, {"weight": "2"}, "t") == Options(weight=2.0)  # the rest default
     assert describe_options(Options) == (
         "steps (integer), weight (number), optimizer (adam|lbfgs), verbose (true|false), "
         "label (text)"
@@ -87,3 +94,30 @@ def test_evaluate_refuses_bad_options_before_anything_runs(tmp_path):
     )
     assert result.exit_code == 2, result.output
     assert "option 'strain_weight' must be a finite number >= 0, got -1.0" in result.output
+
+
+def test_the_options_survive_their_json_and_are_built_back_with_their_checks():
+    options = Options(steps=3, weight=0.5, optimizer="adam", verbose=True, label="ünï")
+    text = options_json(options)
+    raw = {"steps": "3", "weight": "0.5", "optimizer": "adam", "verbose": "on", "label": "ünï"}
+    assert text == options_json(parse_options(Options, raw, "t"))
+    assert list(json.loads(text)) == sorted(options_data(options))  # equal options, equal text
+    assert options_from_data(Options, json.loads(text), "t") == options
+    assert options_from_data(Options, {}, "t") == Options()  # a run that set none
+    with pytest.raises(OptionError, match="task 't' has no option 'stepz'; did you mean"):
+        options_from_data(Options, {"stepz": 3}, "t")
+    with pytest.raises(OptionError, match="option 'steps' must be at least 1, got 0"):
+        options_from_data(Options, {"steps": 0}, "t")
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"steps": 3}, "must be the task's options dataclass .its options_type., got dict"),
+        (Options, "got type"),
+        (Options(weight=float("nan")), "must be JSON-serialisable"),
+    ],
+)
+def test_what_is_not_an_options_object_cannot_be_sent(options, message):
+    with pytest.raises(TypeError, match=message):
+        options_json(options)

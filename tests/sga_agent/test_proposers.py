@@ -27,7 +27,6 @@ from sga_agent.proposers import (
     Proposer,
     ProposerError,
     ReplayProposer,
-    describe_proposer,
 )
 from sga_agent.proposers.litellm_backbone import (
     MAX_BACKOFF_S,
@@ -332,7 +331,7 @@ def test_a_misspelt_provider_gets_a_suggestion(litellm: Any) -> None:
 def test_the_description_names_the_model_and_hides_url_credentials(litellm: Any) -> None:
     backbone = proposer("openai/local", api_base="http://user:hunter2@127.0.0.1:8000/v1")
     assert isinstance(backbone, Proposer)
-    description = describe_proposer(backbone)
+    description = backbone.describe()
     assert description["name"] == backbone.name == "litellm:openai/local"
     assert description["api_base"] == "http://***@127.0.0.1:8000/v1"
     assert "hunter2" not in str(description) and KEY not in str(description)
@@ -489,7 +488,6 @@ def test_the_runner_makes_every_kind_of_proposer(tmp_path: Any, litellm: Any) ->
 
     builtin, replay, model = made("builtin"), made(f"replay:{run.path}"), made("openai/gpt-4o")
     assert isinstance(builtin, BuiltinAdapter) and builtin.name == "builtin:gp"
-    assert builtin.task_options == {"optimizer": "lbfgs"}
     assert isinstance(replay, ReplayProposer) and isinstance(model, LiteLLMProposer)
     assert all(isinstance(p, Proposer) for p in (builtin, replay, model))
     texts = builtin.propose(ProposalRequest(["01-exploit-00"], 0.5, seed=3))

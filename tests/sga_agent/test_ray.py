@@ -26,7 +26,7 @@ from sga_agent.cli import main
 from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.proposers.base import Proposal
 from sga_agent.run_store import RunStore
-from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import Evaluation, EvaluationSettings, NoOptions, PromptParts
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 TASK = f"{__name__}:LiteralTask"
@@ -104,7 +104,7 @@ class Scripted:
 def config(**overrides) -> SearchConfig:
     values = {"task": TASK, "proposer": "scripted", "iterations": 2, "top_k": 2,
               "exploit": 1, "explore": 2, "workers": 2, "timeout_s": 120.0}  # fmt: skip
-    return SearchConfig(**{**values, **overrides})
+    return SearchConfig.from_settings(**{**values, **overrides})
 
 
 @pytest.fixture
@@ -392,15 +392,15 @@ def test_an_unreachable_cluster_fails_at_once():
 )
 def test_executor_settings_are_checked(settings, fragment):
     with pytest.raises(ConfigError, match=fragment):
-        SearchConfig(task="elastic", proposer="builtin", **settings)
+        SearchConfig.from_settings(task="elastic", proposer="builtin", **settings)
 
 
 def test_configs_written_before_the_executor_existed_still_load():
-    old = SearchConfig(task="elastic", proposer="builtin").to_dict()
+    old = SearchConfig(task="elastic", proposer="builtin").settings()  # flat, as they were
     for key in ("executor", "ray_address", "ray_cpus_per_task", "ray_memory_mb"):
         del old[key]
-    loaded = SearchConfig.from_dict(old)
-    assert loaded.executor == "local" and loaded.ray_address is None
+    loaded = SearchConfig.from_dict(old, NoOptions)
+    assert loaded.executor.kind == "local" and loaded.executor.ray_address is None
 
 
 def test_resume_takes_a_ray_address_only_for_a_ray_run(tmp_path):

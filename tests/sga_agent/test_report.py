@@ -180,6 +180,7 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     from sga_agent.registry import load_task
     from sga_agent.task import EvaluationSettings
     from tasks.constitutive.evaluation import ensure_runtime
+    from tasks.constitutive.options import ConstitutiveOptions
     from tasks.constitutive.report import MOTION_FRAMES
 
     ensure_runtime("float32")
@@ -208,7 +209,7 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     # the true law: examples/laws/neo_hookean.py captured and scored unfitted, here
     task = load_task("elastic")
     truth_code = (Path(__file__).parents[2] / "examples/laws/neo_hookean.py").read_text()
-    settings = EvaluationSettings(epochs=0, options={"steps": steps})
+    settings = EvaluationSettings(epochs=0, options=ConstitutiveOptions(steps=steps))
     truth = task.evaluate(task.capture(truth_code), settings)
     assert found["truth"] == "neo-Hookean, E = e^13 Pa, nu = 0.245"
     assert found["truth_loss"] < 1e-12 and truth.loss < 1e-12  # float32 noise, both
@@ -288,7 +289,7 @@ def test_the_runner_adds_the_findings_the_search_core_leaves_out(tmp_path):
     totals = store.summary()
     assert "findings" not in totals and totals["best"]["candidate"] == "02-exploit-00"
 
-    record_findings(store, FakeTask())
+    record_findings(store, FakeTask(), cfg.task_options)
     summary = store.summary()
     assert {key: summary[key] for key in totals} == totals  # the totals stay as they were
     findings = summary["findings"]

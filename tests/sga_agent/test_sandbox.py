@@ -10,12 +10,13 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from sga_agent import sandbox
+from sga_agent.helper_protocol import FitSettings
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.sandbox import (
     EvaluationSlot,
@@ -26,6 +27,7 @@ from sga_agent.sandbox import (
 )
 from sga_agent.task import EvaluationSettings
 from tests.sga_agent import doubles
+from tests.sga_agent.doubles import DoubleOptions
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DOUBLE = "tests.sga_agent.doubles:ExecTask"
@@ -56,7 +58,8 @@ def writer(path: Path) -> str:
 
 def test_good_solution_is_evaluated_despite_its_prints():
     solution = "print('{\"valid\": false}')\nloss = 0.25\nparameters = {'E': 3.0}\n"
-    settings = EvaluationSettings(epochs=3, learning_rate=0.1, seed=7, options={"a": [1, 2]})
+    options = DoubleOptions(label="seven")
+    settings = EvaluationSettings(epochs=3, learning_rate=0.1, seed=7, options=options)
     evaluation = sandboxed(solution, settings=settings)
     assert evaluation.valid, evaluation.reason
     assert evaluation.status == "ok"
@@ -66,7 +69,7 @@ def test_good_solution_is_evaluated_despite_its_prints():
         "epochs": 3,
         "learning_rate": 0.1,
         "seed": 7,
-        "options": {"a": [1, 2]},
+        "options": {"label": "seven", "notes": None},  # the fit worker's DoubleOptions
     }
     assert 0 < evaluation.extras["capture_seconds"] <= evaluation.seconds < 60
     assert evaluation.artifacts["captured"]["loss"] == 0.25  # what the fit was given
@@ -302,17 +305,18 @@ def test_the_fit_worker_warms_up_once_before_its_first_candidate():
     task = "tests.sga_agent.doubles:WarmingTask"
     with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
         first, second = pool.map(task, ["loss = 1.0\n", "loss = 2.0\n"], SETTINGS)
-    assert first.extras["warmed_with"] == {} == second.extras["warmed_with"]
+    defaults = {"type": "DoubleOptions", "label": "", "notes": None}  # no options: the defaults
+    assert first.extras["warmed_with"] == defaults == second.extras["warmed_with"]
     assert first.extras["fit_pid"] == second.extras["fit_pid"]
 
 
 def _staged_fit_worker(notes: Path) -> tuple[subprocess.Popen, str]:
     """A fit worker of StagedWarmingTask, started with one request already waiting."""
-    settings = EvaluationSettings(options={"notes": str(notes)})
+    sent = FitSettings.of(EvaluationSettings(options=DoubleOptions(notes=str(notes))))
     data = doubles.StagedWarmingTask().capture("loss = 1.0\n")
-    request = json.dumps({"data": data, "settings": asdict(settings)}) + "\n"
+    request = json.dumps({"data": data, "settings": sent.request()}) + "\n"
     command = [sys.executable, "-m", "sga_agent.fit_worker",
-               "tests.sga_agent.doubles:StagedWarmingTask", "4096", json.dumps(settings.options)]
+               "tests.sga_agent.doubles:StagedWarmingTask", "4096", sent.options]
     worker = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                               env=os.environ | {"PYTHONPATH": str(REPO_ROOT)})  # fmt: skip
     worker.stdin.write(request)  # before the worker has even started Python
@@ -353,7 +357,7 @@ def test_warm_up_stages_not_reached_when_the_input_ends_are_skipped(tmp_path):
 
 def test_a_single_evaluation_warms_up_the_first_stage_only(tmp_path):
     notes = tmp_path / "stages"
-    settings = EvaluationSettings(options={"notes": str(notes)})
+    settings = EvaluationSettings(options=DoubleOptions(notes=str(notes)))
     evaluation = sandboxed("loss = 1.0\n", settings=settings,
                            task="tests.sga_agent.doubles:StagedWarmingTask")  # fmt: skip
     assert evaluation.status == "ok"
@@ -410,11 +414,24 @@ def test_isolation_can_be_disabled_for_debugging(tmp_path):
     assert outside.read_text() == "escaped"
 
 
-def test_unserialisable_settings_are_a_caller_error():
-    with pytest.raises(TypeError, match="settings.options must be JSON-serialisable"):
-        sandboxed("", settings=EvaluationSettings(options={"f": object()}))
-    with SandboxPool(1, LIMITS) as pool, pytest.raises(TypeError, match="settings.options"):
-        pool.submit(DOUBLE, "", EvaluationSettings(options={"f": object()}))
+@dataclass(frozen=True)
+class Unsendable:
+    f: object = None
+
+
+def test_options_that_cannot_be_sent_are_a_caller_error():
+    with pytest.raises(TypeError, match="task options must be JSON-serialisable"):
+        sandboxed("", settings=EvaluationSettings(options=Unsendable(object())))
+    with SandboxPool(1, LIMITS) as pool, pytest.raises(TypeError, match="options dataclass"):
+        pool.submit(DOUBLE, "", EvaluationSettings(options={"label": "a dict"}))
+
+
+def test_options_a_fit_worker_cannot_build_fail_every_evaluation_with_the_reason():
+    settings = EvaluationSettings(options=Unsendable())  # not the double's DoubleOptions
+    evaluation = sandboxed("loss = 1.0\n", settings=settings)
+    assert (evaluation.valid, evaluation.status) == (False, "error")
+    assert "the options of task 'tests.sga_agent.doubles:ExecTask' failed" in evaluation.reason
+    assert "has no option 'f'" in evaluation.reason
 
 
 @pytest.mark.parametrize(

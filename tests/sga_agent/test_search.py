@@ -11,10 +11,11 @@ import re
 import threading
 import time
 from concurrent.futures import Future
+from dataclasses import dataclass
 
 import pytest
 
-from sga_agent.config import SearchConfig
+from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.proposers.base import Proposal, ProposalRequest, ProposerError
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.proposers.replay import ReplayProposer
@@ -87,7 +88,7 @@ def config(**overrides) -> SearchConfig:
     values = {"task": "fake", "proposer": "scripted", "iterations": 2, "top_k": 2,
               "exploit": 1, "explore": 2, "workers": 1}  # fmt: skip
     values.update(overrides)
-    return SearchConfig(**values)
+    return SearchConfig.from_settings(**values)
 
 
 def run(tmp_path, answers, **overrides):
@@ -263,7 +264,6 @@ class Halving:
     """A task's built-in proposer double: halves the best parent's number; never reads a prompt."""
 
     name = "builtin:halving"
-    task_options = {"steps": 3}
 
     def __init__(self) -> None:
         self.calls: list[tuple[list[Parent], float, int, int]] = []
@@ -285,7 +285,7 @@ def test_a_builtin_proposer_gets_the_parents_and_no_prompt_is_built(tmp_path, mo
     store = RunStore.create(tmp_path, cfg, {})
     builtin = Halving()
     adapter = BuiltinAdapter(builtin)
-    assert adapter.name == "builtin:halving" and adapter.task_options == {"steps": 3}
+    assert adapter.name == "builtin:halving"
     result = Search(cfg, FakeTask(), adapter, LossInCode(), store).run()
     assert [call[1:3] for call in builtin.calls] == [(0.5, 1), (1.0, 2)]
     assert builtin.calls[0][0][-1].loss == 100.0  # the seed, the only parent
@@ -332,3 +332,46 @@ def test_a_hard_proposer_failure_stops_the_search_resumably(tmp_path):
     assert error["transient"] is False
     assert not (store.path / "summary.json").exists()
     assert not store.recorded().finished
+
+
+@dataclass(frozen=True)
+class Steps:
+    """Options of a task double."""
+
+    steps: int = 1
+
+
+class FakeTaskWithOptions(FakeTask):
+    options_type = Steps
+
+
+class Recording(LossInCode):
+    """Evaluator double that also keeps the settings each candidate was submitted with."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.settings: list = []
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        self.settings.append(settings)
+        return super().submit(task, solution, settings)
+
+
+def test_the_config_s_options_object_is_what_every_evaluation_gets(tmp_path):
+    options = Steps(steps=7)
+    cfg = config(iterations=1, task_options=options, epochs=3, seed=5)
+    store = RunStore.create(tmp_path, cfg, {})
+    evaluator = Recording()
+    Search(cfg, FakeTaskWithOptions(), Scripted([LAW.format(value=1.0)] * 3), evaluator,
+           store).run()  # fmt: skip
+    assert evaluator.settings and all(s.options is options for s in evaluator.settings)
+    assert {(s.epochs, s.seed) for s in evaluator.settings} == {(3, 5)}
+    no_fit = config(bilevel=False, epochs=3, task_options=options).evaluation_settings()
+    assert no_fit.epochs == 0 and no_fit.options is options
+
+
+def test_options_of_another_type_than_the_task_s_are_refused(tmp_path):
+    cfg = config()  # NoOptions: a task without options
+    store = RunStore.create(tmp_path, cfg, {})
+    with pytest.raises(ConfigError, match="task 'fake' takes options of type Steps"):
+        Search(cfg, FakeTaskWithOptions(), Scripted([]), LossInCode(), store)

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from sga_agent.config import SearchConfig
+from sga_agent.helper_protocol import FitSettings
 from sga_agent.run_store import RunStore
 from sga_agent.sandbox import EvaluationSlot, Recycling, SandboxLimits, SandboxPool
 from sga_agent.search import Search
@@ -31,7 +32,7 @@ from tests.sga_agent.test_search import Scripted
 REPO_ROOT = Path(__file__).resolve().parents[2]
 TASK = "tests.sga_agent.doubles:HealthTask"
 LIMITS = SandboxLimits(timeout_s=60)
-SETTINGS = EvaluationSettings()
+SETTINGS = FitSettings.of(EvaluationSettings())  # as a pool sends them to its slots
 
 
 def candidate(loss: float, **report) -> str:
@@ -233,8 +234,10 @@ def _answers(marks: Path) -> list[str]:
 
 
 def _search(folder: Path, marks: Path, killer=None) -> RunStore:
-    config = SearchConfig(task=TASK, proposer="scripted", iterations=3, top_k=2, exploit=2,
-                          explore=6, workers=2, timeout_s=60.0)  # fmt: skip
+    config = SearchConfig.from_settings(
+        task=TASK, proposer="scripted", iterations=3, top_k=2, exploit=2, explore=6,
+        workers=2, timeout_s=60.0, task_options=doubles.DoubleOptions(),
+    )  # fmt: skip
     store = RunStore.create(folder, config, {})
     pool = SandboxPool(2, LIMITS, extra_python_path=[REPO_ROOT],
                        recycling=Recycling(evaluations=5))  # fmt: skip

@@ -75,10 +75,6 @@ class GeneticProgrammingProposer:
     """
 
     name = "builtin:gp"
-    #: Evaluation options of its runs: constants fitted by L-BFGS, as symbolic-regression tools
-    #: fit theirs with quasi-Newton steps (with Adam's few small steps at a short budget, a
-    #: child's constants barely move; ``--option optimizer=adam`` restores it).
-    task_options = {"optimizer": "lbfgs"}
 
     def __init__(self, searched: str) -> None:
         if searched not in grammar.KINDS:

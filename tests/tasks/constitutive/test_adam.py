@@ -48,8 +48,9 @@ import json, sys
 import torch
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
+from tasks.constitutive.options import ConstitutiveOptions
 task = load_task("elastic")
-options = {"steps": 200}
+options = ConstitutiveOptions(steps=200)
 for _stage in task.warm_up_fit(options):
     pass
 data = json.loads(sys.stdin.read())

@@ -13,6 +13,7 @@ import torch
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings, InvalidSolution, Task
 from tasks.constitutive.law_code import LawCodeError
+from tasks.constitutive.options import ConstitutiveOptions
 
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
 TRUTH = {
@@ -22,7 +23,7 @@ TRUTH = {
     "fluid": "fluid.py",
     "imaginary": "mixture.py",
 }
-QUICK = {"steps": 200}  # two teacher-forced segments: enough to tell the laws apart
+QUICK = ConstitutiveOptions(steps=200)  # two teacher-forced segments: tells the laws apart
 
 
 def score(name: str, code: str, epochs: int = 0, **settings) -> object:
@@ -97,7 +98,7 @@ def test_lbfgs_steps_back_from_a_trial_point_that_blows_up():
         "        self.log_scale = nn.Parameter(torch.tensor(log_scale))\n"
         "    def forward(self, F):\n        return F * torch.exp(self.log_scale)\n"
     )
-    result = score("plasticine", code, epochs=3, options={**QUICK, "optimizer": "lbfgs"})
+    result = score("plasticine", code, epochs=3, options=ConstitutiveOptions(200, "lbfgs"))
     assert result.valid and result.extras["stopped"] == ""
     assert len(result.curves["loss"]) >= 2 and result.loss == min(result.curves["loss"])
     assert "trial points of the line search were rejected" in result.feedback
@@ -221,7 +222,7 @@ def test_a_precision_other_than_the_running_one_is_an_error():
     """The test session runs Taichi in float64 (tests/conftest.py)."""
     task = load_task("elastic")
     with pytest.raises(ValueError, match="precision=float32 differs from the float64 Taichi"):
-        task.evaluate({}, EvaluationSettings(options={"precision": "float32"}))
+        task.evaluate({}, EvaluationSettings(options=ConstitutiveOptions(precision="float32")))
 
 
 UNUSED = """import torch
@@ -264,7 +265,8 @@ ONE_SENTENCE = (
 @pytest.mark.parametrize(("stress", "unused"), [(NEITHER, 2), (ONE, 1)])
 def test_a_parameter_the_loss_ignores_is_named_in_one_sentence(stress, unused):
     """Fitted, not "element 0 of tensors does not require grad"."""
-    result = score("elastic", UNUSED.format(stress=stress), epochs=1, options={"steps": 100})
+    result = score("elastic", UNUSED.format(stress=stress), epochs=1,
+                   options=ConstitutiveOptions(steps=100))  # fmt: skip
     assert result.valid, result.reason
     sentences = [line for line in result.feedback.splitlines() if "does not depend" in line]
     assert len(sentences) == 1 and "poissons_ratio" in sentences[0]

@@ -12,10 +12,9 @@ import torch
 
 from bridges import laws as torch_laws
 from bridges.linalg import stable_linalg
-from sga_agent.config import SearchConfig
 from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.registry import load_task
-from sga_agent.runner import with_preferred_options
+from sga_agent.runner import task_options
 from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
 from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer
@@ -35,6 +34,7 @@ from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 from tasks.constitutive.inner import scalar_parameters
 from tasks.constitutive.law_code import load_law
+from tasks.constitutive.options import ConstitutiveOptions
 
 GP = Path(__file__).resolve().parents[3] / "tasks" / "constitutive" / "gp"
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
@@ -358,7 +358,7 @@ def test_gp_laws_are_scored_by_the_simulation():
     seeded = [Parent(task.seed_solution(), 1.0)]
     answers = task.builtin_proposer().propose_from(seeded, 1.0, 2, seed=0)
     codes = [law_code(Genome("plastic")), *(parse_response(a).code for a in answers)]
-    settings = EvaluationSettings(epochs=1, options={"steps": 100})
+    settings = EvaluationSettings(epochs=1, options=ConstitutiveOptions(steps=100))
     results = [task.evaluate(task.capture(code), settings) for code in codes]
     assert results[0].valid and math.isfinite(results[0].loss)
     for result in results:
@@ -366,8 +366,9 @@ def test_gp_laws_are_scored_by_the_simulation():
 
 
 def test_gp_runs_fit_constants_with_lbfgs_unless_told_otherwise():
-    proposer = load_task("elastic").builtin_proposer()
-    default = SearchConfig(task="elastic", proposer="builtin")
-    assert with_preferred_options(default, proposer).task_options == {"optimizer": "lbfgs"}
-    chosen = SearchConfig(task="elastic", proposer="builtin", task_options={"optimizer": "adam"})
-    assert with_preferred_options(chosen, proposer) == chosen
+    task = load_task("elastic")
+    for proposer in ("builtin", "builtin:gp"):
+        assert task_options(task, {}, proposer) == ConstitutiveOptions(optimizer="lbfgs")
+    given = {"optimizer": "adam", "steps": "50"}
+    assert task_options(task, given, "builtin") == ConstitutiveOptions(steps=50, optimizer="adam")
+    assert task_options(task, {}, "openai/gpt-4o") == ConstitutiveOptions()  # a model: the task's

@@ -10,7 +10,7 @@ from sga_agent.config import SearchConfig
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.registry import load_task
 from sga_agent.run_store import RunStore
-from sga_agent.runner import with_preferred_options
+from sga_agent.runner import task_options
 from sga_agent.search import Search
 from sga_agent.task import Evaluation, InvalidSolution
 
@@ -42,11 +42,11 @@ def test_small_gp_search_beats_the_seed(tmp_path):
     beat the seed law by 1.96x, 2.95x and 1.74x."""
     task = load_task("elastic")
     proposer = BuiltinAdapter(task.builtin_proposer())
-    config = SearchConfig(
+    options = task_options(task, {"steps": "200"}, "builtin")  # with the GP's L-BFGS
+    config = SearchConfig.from_settings(
         task="elastic", proposer="builtin", iterations=1, top_k=4, exploit=1, explore=3,
-        epochs=2, task_options={"steps": 200}, workers=1, seed=0,
+        epochs=2, task_options=options, workers=1, seed=0,
     )  # fmt: skip
-    config = with_preferred_options(config, proposer)
     store = RunStore.create(tmp_path, config, {})
     result = Search(config, task, proposer, InProcess(task), store).run()
     seed = next(entry for entry in result.heap.entries if entry.candidate == "00-seed")

@@ -19,6 +19,7 @@ from sga_agent.task import EvaluationSettings
 from tasks.constitutive import law_kernel
 from tasks.constitutive.law_capture import capture_law
 from tasks.constitutive.law_graph import build_law
+from tasks.constitutive.options import ConstitutiveOptions
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples" / "laws"
 
@@ -132,6 +133,7 @@ from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
 from tasks.constitutive import law_kernel
 from tasks.constitutive.law_graph import build_law
+from tasks.constitutive.options import ConstitutiveOptions
 report = {}
 for name, (task, path) in json.loads(sys.argv[1]).items():
     code = open(path).read()
@@ -140,8 +142,8 @@ for name, (task, path) in json.loads(sys.argv[1]).items():
     F = torch.eye(3) + 0.1 * torch.randn(300, 3, 3, generator=torch.Generator().manual_seed(0))
     law = build_law(data["law"], torch.float32)
     compiled = law_kernel.kernel_law(law, F, svd=True) is not None
-    losses = [evaluator.evaluate(data, EvaluationSettings(epochs=1, options={
-        "steps": 100, "law_kernels": kernels})).curves["loss"] for kernels in ("all", "none")]
+    losses = [evaluator.evaluate(data, EvaluationSettings(epochs=1, options=ConstitutiveOptions(
+        steps=100, law_kernels=kernels))).curves["loss"] for kernels in ("all", "none")]
     report[name] = {"compiled": compiled, "losses": losses}
 print(json.dumps(report))
 """
@@ -176,8 +178,8 @@ def test_a_fit_scores_a_law_the_same_with_and_without_kernels():
     task = load_task("elastic")
     data = task.capture((EXAMPLES / "neo_hookean.py").read_text())
     results = [
-        task.evaluate(data, EvaluationSettings(epochs=2, options={"steps": 100,
-                                                                  "law_kernels": kernels}))
+        task.evaluate(data, EvaluationSettings(
+            epochs=2, options=ConstitutiveOptions(steps=100, law_kernels=kernels)))
         for kernels in ("no-svd", "none")
     ]  # fmt: skip
     assert all(result.valid for result in results)

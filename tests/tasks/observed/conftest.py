@@ -41,11 +41,11 @@ def ready_task(name: str, folder: Path):
     """The registered task ``name``, set up on a small observation written into ``folder``
     where its seed and prompt need options (``observed``, plastic searched)."""
     from sga_agent.registry import load_task
+    from tasks.observed.options import ObservedOptions
 
     task = load_task(name)
     if name != "observed":
         return task
     path = folder / "observed.npz"
     np.savez(path, **observation_arrays())
-    options = {"observation": str(path), "searched": "plastic", "E": 5e4, "nu": 0.3}
-    return task.with_options(options)
+    return task.with_options(ObservedOptions(str(path), "plastic", E=5e4, nu=0.3))

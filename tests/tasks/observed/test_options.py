@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from sga_agent.cli import main
 from sga_agent.options import parse_options
 from tasks.observed import ObservedTask
+from tasks.observed.options import ObservedOptions
 from tests.tasks.observed.conftest import observation_arrays
 
 PLASTIC = ["--option", "searched=plastic", "--option", "E=5e4", "--option", "nu=0.3"]
@@ -73,8 +74,9 @@ def test_options_are_typed_with_the_path_made_absolute(tmp_path: Path, monkeypat
     raw = {"observation": "obs.npz", "searched": "plastic", "E": "5e4", "nu": "0.3",
            "segment": "20"}  # fmt: skip
     options = parse_options(ObservedTask.options_type, raw, "observed")
-    assert options["observation"] == str(tmp_path / "obs.npz")
-    assert options["E"] == 5e4 and options["segment"] == 20
+    assert isinstance(options, ObservedOptions)
+    assert options.observation == str(tmp_path / "obs.npz")
+    assert options.E == 5e4 and options.segment == 20 and options.elastic == "stvk"
 
 
 def test_the_prompt_describes_the_data_and_no_truth(tmp_path: Path) -> None:
@@ -82,13 +84,12 @@ def test_the_prompt_describes_the_data_and_no_truth(tmp_path: Path) -> None:
     (tmp_path / "obs.truth.json").write_text(
         '{"family": "vonmises", "parameters": {"E": 5e4, "nu": 0.3, "yield_stress": 777}}'
     )
-    task = ObservedTask().with_options({"observation": str(path), "searched": "plastic",
-                                        "E": 5e4, "nu": 0.3})  # fmt: skip
+    task = ObservedTask().with_options(ObservedOptions(str(path), "plastic", E=5e4, nu=0.3))
     context = task.prompt_parts().context
     assert "8 of the 27 points at 4 moments" in context
     assert "no teacher forcing" in context and "Young's modulus 50000 Pa" in context
     assert "777" not in context and "von Mises" not in context
     assert "return F" in task.seed_solution()
-    elastic = ObservedTask().with_options({"observation": str(path), "searched": "elastic"})
+    elastic = ObservedTask().with_options(ObservedOptions(str(path), "elastic"))
     assert "Kirchhoff" in elastic.prompt_parts().context
     assert "log_youngs_modulus" in elastic.seed_solution()

@@ -44,8 +44,8 @@ def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]
 
 def recorded_run(parent: Path) -> Path:
     """A run folder holding a model's answers, as a search with a model would record them."""
-    config = SearchConfig(task="numbers", proposer="openai/gpt-4o", iterations=2, exploit=1,
-                          explore=1)  # fmt: skip
+    config = SearchConfig.from_settings(task="numbers", proposer="openai/gpt-4o", iterations=2,
+                                        exploit=1, explore=1)  # fmt: skip
     store = RunStore.create(parent, config, {"proposer": "openai/gpt-4o"})
     for candidate, text in ANSWERS:
         proposal = Proposal(text, "openai/gpt-4o", 0.5, prompt_tokens=100, completion_tokens=20)
