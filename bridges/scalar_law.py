@@ -29,9 +29,9 @@ from collections.abc import Callable, Sequence
 
 import taichi as ti
 import torch
-from taichi.lang import impl
 
 from bridges.step import torch_dtype
+from taichi_mpm import _compat
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 
 #: Operations of a program: name -> number of arguments.
@@ -400,7 +400,7 @@ def _emit(program: Program, wanted: Sequence[Scalar | float], inputs, parameters
         elif name == "part":
             values[index] = values[args[0]][int(args[1][1])]
         else:
-            values[index] = impl.expr_init(_EMIT[name](*[value(a) for a in args]))
+            values[index] = _compat.local(_EMIT[name](*[value(a) for a in args]))
     return [values[w.index] if isinstance(w, Scalar) else w for w in wanted]
 
 
@@ -409,7 +409,7 @@ def _emit_svd(entries: list) -> list:
     u, s, v = jacobi_svd(ti.Matrix([entries[0:3], entries[3:6], entries[6:9]]))
 
     def at(matrix, *index):  # what ``matrix[index]`` is in a kernel's own code
-        return impl.subscript(None, matrix, *index)
+        return _compat.element(matrix, *index)
 
     flip = at(s, 2) < 0  # jacobi_svd's U is a rotation: torch's makes S[2] >= 0 instead
     values = []
@@ -417,7 +417,7 @@ def _emit_svd(entries: list) -> list:
         values += [at(u, i, 0), at(u, i, 1), ti.select(flip, -at(u, i, 2), at(u, i, 2))]
     values += [at(s, 0), at(s, 1), ti.abs(at(s, 2))]
     values += [at(v, j, i) for i in range(3) for j in range(3)]
-    return [impl.expr_init(x) for x in values]
+    return [_compat.local(x) for x in values]
 
 
 def _select(c, a, b):
@@ -494,9 +494,8 @@ class CompiledLaw:
                                 "compiled_law_forward")  # fmt: skip
         self._reverse = _kernel(reverse, grads, first + self.saved, self.parameters,
                                 "compiled_law_reverse")  # fmt: skip
-        kernels = [k for w in (self._forward, self._reverse) for k in (w._primal, w._adjoint)]
         #: forgets the kernels in Taichi's runtime once this law is collected (or released)
-        self.release = weakref.finalize(self, _forget, kernels)
+        self.release = weakref.finalize(self, _compat.forget, [self._forward, self._reverse])
         _compile(self._forward, self.inputs, self.parameters, self.outputs + self.saved)
         _compile(self._reverse, first + self.saved, self.parameters, self.inputs + self.parameters)
 
@@ -515,18 +514,6 @@ class CompiledLaw:
         grads = x.new_empty(x.shape[0], self.inputs + self.parameters)
         self._reverse(rows, parameters, grads)
         return grads[:, : self.inputs], grads[:, self.inputs :].sum(0)
-
-
-def _forget(kernels: list) -> None:
-    """Remove ``kernels`` (Taichi ``Kernel`` objects) from Taichi's Python runtime and drop
-    their compiled handles: what Taichi 1.7 allows to free of a kernel (its C++ side stays)."""
-    listed = impl.get_runtime().kernels
-    for kernel in kernels:
-        kernel.compiled_kernels.clear()
-        for index, other in enumerate(listed):
-            if other is kernel:
-                del listed[index]
-                break
 
 
 def _needed(program: Program, wanted: Sequence[Scalar | float]) -> set[int]:
@@ -581,11 +568,11 @@ def _kernel(program: Program, wanted: list, width: int, parameters: int, name: s
 
 
 def _write(program, wanted, rows, params, out, p, width, parameters, count) -> None:
-    inputs = [impl.subscript(None, rows, p, k) for k in range(width)]
-    values = [impl.subscript(None, params, k) for k in range(parameters)]
+    inputs = [_compat.element(rows, p, k) for k in range(width)]
+    values = [_compat.element(params, k) for k in range(parameters)]
     results = _emit(program, wanted, inputs, values)
     for k in range(count):
-        impl.subscript(None, out, p, k)._assign(results[k])
+        _compat.store(_compat.element(out, p, k), results[k])
 
 
 def _compile(kernel, width: int, parameters: int, outputs: int) -> None:
@@ -596,15 +583,10 @@ def _compile(kernel, width: int, parameters: int, outputs: int) -> None:
     a law's kernels are compiled for the law at hand, so none is written to disk (a search
     would otherwise add two files to the user's cache per candidate)."""
     dtype = torch_dtype()
-    config = impl.current_cfg()
-    cached, config.offline_cache = config.offline_cache, False
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", category=SyntaxWarning)
-            kernel(torch.zeros(1, width, dtype=dtype), torch.zeros(max(parameters, 1), dtype=dtype),
-                   torch.zeros(1, outputs, dtype=dtype))  # fmt: skip
-    finally:
-        config.offline_cache = cached
+    with _compat.without_offline_cache(), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=SyntaxWarning)
+        kernel(torch.zeros(1, width, dtype=dtype), torch.zeros(max(parameters, 1), dtype=dtype),
+               torch.zeros(1, outputs, dtype=dtype))  # fmt: skip
 
 
 def flat_parameters(parameters: Sequence[torch.Tensor], like: torch.Tensor) -> torch.Tensor:
@@ -657,7 +639,11 @@ class _LawFunction(torch.autograd.Function):
                                             grad.reshape(rows.shape[0], -1))  # fmt: skip
         pieces = split_parameters(grad_flat, parameters)
         unused = split_parameters(torch.tensor(law.constant_zero), parameters)
-        return (grad_rows.reshape(ctx.shape), None, *[
-            None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
-            for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
-        ])
+        return (
+            grad_rows.reshape(ctx.shape),
+            None,
+            *[
+                None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
+                for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
+            ],
+        )

@@ -12,9 +12,9 @@ import gc
 import numpy as np
 import pytest
 import torch
-from taichi.lang import impl
 
 from bridges import scalar_law as sl
+from taichi_mpm import _compat
 
 EYE = torch.eye(3, dtype=torch.float64)
 
@@ -125,7 +125,7 @@ def test_a_law_without_parameters_and_constant_outputs():
 
 
 def test_a_collected_law_leaves_its_kernels_out_of_taichi_s_runtime():
-    kernels = impl.get_runtime().kernels
+    kernels = _compat.runtime_kernels()
     before = len(kernels)
     program = sl.Program(9, 1)
     law = sl.CompiledLaw(program, [x * program.parameters[0] for x in program.inputs])
