@@ -132,18 +132,17 @@ class KernelClock:
              "compiled_law_reverse": "its reverse"}  # fmt: skip
 
     def __init__(self) -> None:
-        from taichi.lang.kernel_impl import Kernel
-
+        from taichi_mpm import _compat
         from tasks.constitutive import inner
 
         self.totals: dict[str, float] = dict.fromkeys(self.NAMES.values(), 0.0)
         self.by_call: list[dict[str, float]] = []
-        launch, fitted_loss = Kernel.__call__, inner.trajectory_loss
+        fitted_loss = inner.trajectory_loss
 
-        def timed_launch(kernel, *args, **kwargs):
+        def timed_launch(launch, kernel):
             started = time.perf_counter()
             try:
-                return launch(kernel, *args, **kwargs)
+                return launch()
             finally:
                 name = self.NAMES.get(kernel.func.__name__, kernel.func.__name__)
                 self.totals[name] = self.totals.get(name, 0.0) + time.perf_counter() - started
@@ -155,7 +154,7 @@ class KernelClock:
             finally:
                 self.by_call.append({k: v - before.get(k, 0.0) for k, v in self.totals.items()})
 
-        Kernel.__call__ = timed_launch
+        _compat.on_kernel_launch(timed_launch)
         inner.trajectory_loss = counted_loss
 
 
@@ -328,12 +327,14 @@ def main() -> None:
                     runs.setdefault(("original", task, condition), []).append(run)
             print(f"round {round_index + 1}/{args.rounds} {task}: done", file=sys.stderr)
     load_after = os.getloadavg()
-    print(f"{os.cpu_count()} cores; load average (1/5/15 min) before "
-          f"{'/'.join(f'{x:.2f}' for x in load_before)}, after "
-          f"{'/'.join(f'{x:.2f}' for x in load_after)}; {time.perf_counter() - started:.0f} s; "
-          f"{args.rounds} rounds x {args.epochs} epochs; ours with a budget of {args.threads} "
-          "thread(s), the original on 1"
-          + ("; 'busy': beside a process spinning on one core" if args.busy_core else ""))
+    print(
+        f"{os.cpu_count()} cores; load average (1/5/15 min) before "
+        f"{'/'.join(f'{x:.2f}' for x in load_before)}, after "
+        f"{'/'.join(f'{x:.2f}' for x in load_after)}; {time.perf_counter() - started:.0f} s; "
+        f"{args.rounds} rounds x {args.epochs} epochs; ours with a budget of {args.threads} "
+        "thread(s), the original on 1"
+        + ("; 'busy': beside a process spinning on one core" if args.busy_core else "")
+    )
     print(f"{'task':<11} {'impl':<9} {'load':<6} {'s/epoch min / median / max':>27} "
           f"{'peak MB':>8} {'ours faster (medians)':>22}")  # fmt: skip
     for task in args.tasks:
@@ -369,8 +370,9 @@ def where_an_epoch_goes(task: str, runs: list[dict], original: float | None) -> 
     names = [name for name in rows[0][1] if any(k.get(name, 0.0) > 0 for _, k in rows)]
     parts = {name: statistics.median(k.get(name, 0.0) for _, k in rows) for name in names}
     kernels = [sum(k.values()) for _, k in rows]
-    parts["torch and Python"] = statistics.median(s - t for (s, _), t in zip(rows, kernels,
-                                                                           strict=True))
+    parts["torch and Python"] = statistics.median(
+        s - t for (s, _), t in zip(rows, kernels, strict=True)
+    )
     lines = [f"{task:<11} ours, where an epoch goes (medians, s): " + ", ".join(
         f"{name} {seconds:.3f}" for name, seconds in parts.items()
     )]  # fmt: skip

@@ -14,6 +14,10 @@ then run as one Taichi launch over all particles forward and one in reverse:
   two;
 * parameter gradients are written per particle and summed by torch (no atomics).
 
+Every operation is defined once, in :data:`OPERATIONS` (in the manner of PyTorch's
+``derivatives.yaml``): its arity, its value on constants, its local derivative, its Taichi
+code and the ATen overloads it translates; adding an operation is adding one entry.
+
 :class:`CompiledLaw` holds the two kernels and :func:`apply_law` runs them as a differentiable
 torch operation. Which laws can be written as a program is the caller's business
 (:mod:`tasks.constitutive.law_kernel` translates a captured law graph).
@@ -26,19 +30,16 @@ import numbers
 import warnings
 import weakref
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import taichi as ti
 import torch
-from taichi.lang import impl
 
 from bridges.step import torch_dtype
+from taichi_mpm import _compat
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 
-#: Operations of a program: name -> number of arguments.
-ARITY = {"add": 2, "sub": 2, "mul": 2, "div": 2, "neg": 1, "powc": 2, "exp": 1, "log": 1,
-         "sqrt": 1, "sin": 1, "cos": 1, "tanh": 1, "abs": 1, "sign": 1, "select": 3, "lt": 2,
-         "le": 2, "gt": 2, "ge": 2, "eq": 2, "ne": 2, "and": 2, "or": 2, "svd": 10,
-         "svd_saved": 11, "part": 2}  # fmt: skip
 #: Most nodes a program may have (forward and reverse): Taichi's compile time grows with it.
 MAX_NODES = 20_000
 
@@ -47,11 +48,63 @@ class ProgramTooLarge(ValueError):
     """The program outgrew :data:`MAX_NODES`."""
 
 
+def _constant_almost_everywhere(args: list, out: Any, g: Any) -> list:
+    """The derivative of a comparison or a sign: no gradient flows through it."""
+    return []
+
+
+@dataclass(frozen=True)
+class Operation:
+    """One operation of a :class:`Program`: everything the compiler knows of it.
+
+    Attributes
+    ----------
+    arity : int
+        Number of arguments.
+    fold : callable or None
+        Its value when the arguments at ``fold_on`` are constants (given as floats; any other
+        argument as it is), as Python computes it (IEEE double); a math error gives NaN.
+        None: never computed on constants.
+    emit : callable
+        Its value inside a kernel being compiled, from its arguments' values (Taichi
+        expressions, or floats for constants).
+    derivative : callable
+        ``derivative(args, out, g)``: ``(argument position, g * d out / d argument)`` pairs, by
+        torch's backward formulas (``out`` the node itself, ``g`` its adjoint, a local of None
+        passing nothing); none for an operation constant almost everywhere.
+    aten : tuple of str
+        ATen overloads that are this operation applied element-wise to their broadcast
+        tensors (:mod:`tasks.constitutive.law_kernel` translates a law graph's by this).
+    constants : tuple of int
+        Argument positions that only a constant may take.
+    fold_on : tuple of int or None
+        The positions whose arguments being constants is enough to fold; None: all.
+    outputs : int
+        Values it makes: more than one are read by ``part`` nodes, and ``derivative`` then
+        gets the list of their adjoints (None where none flows) as ``g``.
+    local : bool
+        Whether its Taichi value is kept in a kernel-local variable (not when ``emit``
+        returns variables already made).
+    """
+
+    arity: int
+    fold: Callable[..., Any] | None
+    emit: Callable[..., Any]
+    derivative: Callable[[list, Any, Any], list] = _constant_almost_everywhere
+    aten: tuple[str, ...] = ()
+    constants: tuple[int, ...] = ()
+    fold_on: tuple[int, ...] | None = None
+    outputs: int = 1
+    local: bool = True
+
+
 class Program:
     """Scalar operations on ``inputs`` input values and ``parameters`` parameter values.
 
     Nodes are numbered in the order they are made (a topological order); equal operations on
-    equal arguments are made once, and operations on constants only are folded.
+    equal arguments are made once, and operations on constants only are folded. A node is
+    ``(name, args)``: an input or a parameter (``args`` its index), or an operation of
+    :data:`OPERATIONS` (``args`` the indices of argument nodes, ``("c", value)`` for constants).
     """
 
     def __init__(self, inputs: int, parameters: int) -> None:
@@ -65,12 +118,18 @@ class Program:
         return Scalar(self, len(self.nodes) - 1)
 
     def op(self, name: str, *args: Scalar | float) -> Scalar | float:
-        """The node ``name(*args)`` (made once), or its value if every argument is a constant."""
-        if ARITY.get(name) != len(args):
-            raise ValueError(f"{name} takes {ARITY.get(name)} arguments, got {len(args)}")
+        """The node ``name(*args)`` (made once), or its value if it folds on constants."""
+        operation = OPERATIONS.get(name)
+        if operation is None or operation.arity != len(args):
+            arity = None if operation is None else operation.arity
+            raise ValueError(f"{name} takes {arity} arguments, got {len(args)}")
+        for position in operation.constants:
+            if isinstance(args[position], Scalar):
+                raise NotImplementedError(f"{name} with a computed argument {position}")
         plain = tuple(a.index if isinstance(a, Scalar) else ("c", float(a)) for a in args)
-        if all(isinstance(a, tuple) for a in plain):
-            return _fold(name, [float(a) for a in args])
+        on = range(len(args)) if operation.fold_on is None else operation.fold_on
+        if all(isinstance(plain[k], tuple) for k in on):
+            return _fold(operation, args)
         key = (name, plain)
         known = self._known.get(key)
         if known is None:
@@ -87,26 +146,21 @@ class Program:
         for output, seed in zip(outputs, seeds, strict=True):
             if isinstance(output, Scalar):
                 adjoint[output.index] = _plus(adjoint.get(output.index), seed)
-        parts: dict[int, list] = {}  # an SVD's node: the adjoints of its 21 values
+        parts: dict[int, list] = {}  # a node of several values: the adjoints of its values
         leaves = len(self.inputs) + len(self.parameters)  # the first nodes; their adjoints stay
         for index in range(len(self.nodes) - 1, leaves - 1, -1):
-            g = adjoint.pop(index, None)
             name, args = self.nodes[index]
-            if name == "part" and g is not None:
-                parts.setdefault(args[0], [None] * 21)[int(args[1][1])] = g
-                continue
-            if name in ("svd", "svd_saved") and index in parts:
-                values = [self._value(a) for a in args]
-                own = [self.op("part", Scalar(self, index), k) for k in range(21)]
-                grad = _svd_adjoint(own, parts.pop(index), values[9])
-                for argument, local in zip(values[:9], grad, strict=True):
-                    if isinstance(argument, Scalar) and not _is(local, 0.0):
-                        adjoint[argument.index] = _plus(adjoint.get(argument.index), local)
-                continue
+            operation = OPERATIONS[name]
+            g = adjoint.pop(index, None) if operation.outputs == 1 else parts.pop(index, None)
             if g is None:
                 continue
+            if name == "part":  # the adjoint of one value of the node it reads
+                whole = args[0]
+                size = OPERATIONS[self.nodes[whole][0]].outputs
+                parts.setdefault(whole, [None] * size)[int(args[1][1])] = g
+                continue
             values = [self._value(a) for a in args]
-            for position, local in _local_gradients(self, name, values, Scalar(self, index), g):
+            for position, local in operation.derivative(values, Scalar(self, index), g):
                 argument = values[position]
                 if isinstance(argument, Scalar) and local is not None:
                     adjoint[argument.index] = _plus(adjoint.get(argument.index), local)
@@ -118,6 +172,16 @@ class Program:
 
 def _plus(total: Scalar | float | None, term: Scalar | float) -> Scalar | float:
     return term if total is None else total + term
+
+
+def _fold(operation: Operation, args: Sequence) -> Any:
+    """``operation``'s value on ``args`` (those it folds on are constants)."""
+    if operation.fold is None:
+        raise NotImplementedError("an operation of constants that is not folded (an SVD)")
+    try:
+        return operation.fold(*[a if isinstance(a, Scalar) else float(a) for a in args])
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return math.nan
 
 
 class Scalar:
@@ -228,83 +292,16 @@ def _is(value, constant: float) -> bool:
 
 
 def apply(name: str, *args: Scalar | float) -> Scalar | float:
-    """``name(*args)`` on scalars or constants (``name`` from :data:`ARITY`)."""
+    """``name(*args)`` on scalars or constants (``name`` from :data:`OPERATIONS`)."""
     for arg in args:
         if isinstance(arg, Scalar):
             return arg.program.op(name, *args)
-    return _fold(name, [float(a) for a in args])
+    return _fold(OPERATIONS[name], args)
 
 
 def select(condition, if_true, if_false):
     """``if_true`` where ``condition`` holds (non-zero), else ``if_false``."""
-    if not isinstance(condition, Scalar):
-        return if_true if condition else if_false
     return apply("select", condition, if_true, if_false)
-
-
-def _fold(name: str, a: list[float]) -> float:
-    """The value of an operation on constants, as Python computes it (IEEE double)."""
-    try:
-        return _FOLD[name](*a)
-    except (ValueError, ZeroDivisionError, OverflowError):
-        return math.nan
-
-
-def _sign(x: float) -> float:
-    return 1.0 if x > 0 else -1.0 if x < 0 else 0.0
-
-
-def _div(a: float, b: float) -> float:
-    if b == 0:
-        return math.nan if a == 0 or a != a else math.copysign(math.inf, a) * math.copysign(1, b)
-    return a / b
-
-
-_FOLD: dict[str, Callable[..., float]] = {
-    "add": lambda a, b: a + b, "sub": lambda a, b: a - b, "mul": lambda a, b: a * b,
-    "div": _div, "neg": lambda a: -a, "powc": math.pow, "exp": math.exp,
-    "log": lambda a: -math.inf if a == 0 else math.log(a), "sqrt": math.sqrt, "sin": math.sin,
-    "cos": math.cos, "tanh": math.tanh, "abs": abs, "sign": _sign,
-    "select": lambda c, a, b: a if c else b,
-    "lt": lambda a, b: float(a < b), "le": lambda a, b: float(a <= b),
-    "gt": lambda a, b: float(a > b), "ge": lambda a, b: float(a >= b),
-    "eq": lambda a, b: float(a == b), "ne": lambda a, b: float(a != b),
-    "and": lambda a, b: float(bool(a) and bool(b)), "or": lambda a, b: float(bool(a) or bool(b)),
-}  # fmt: skip
-
-
-def _local_gradients(program: Program, name: str, a: list, out: Scalar, g):
-    """(argument position, g * d out / d argument) pairs, with torch's backward formulas."""
-    if name == "add":
-        return [(0, g), (1, g)]
-    if name == "sub":
-        return [(0, g), (1, -g)]
-    if name == "mul":
-        return [(0, g * a[1]), (1, g * a[0])]
-    if name == "div":
-        return [(0, g / a[1]), (1, -g * a[0] / (a[1] * a[1]))]
-    if name == "neg":
-        return [(0, -g)]
-    if name == "powc":
-        exponent = a[1]
-        return [(0, 0.0 if exponent == 0 else g * (exponent * a[0] ** (exponent - 1)))]
-    if name == "exp":
-        return [(0, g * out)]
-    if name == "log":
-        return [(0, g / a[0])]
-    if name == "sqrt":
-        return [(0, g / (2.0 * out))]
-    if name == "sin":
-        return [(0, g * apply("cos", a[0]))]
-    if name == "cos":
-        return [(0, -g * apply("sin", a[0]))]
-    if name == "tanh":
-        return [(0, g * (1.0 - out * out))]
-    if name == "abs":
-        return [(0, g * apply("sign", a[0]))]
-    if name == "select":
-        return [(1, select(a[0], g, 0.0)), (2, select(a[0], 0.0, g))]
-    return []  # comparisons, sign, and, or: constant almost everywhere
 
 
 def svd(entries: Sequence[Scalar | float], tolerance: float) -> list[Scalar | float]:
@@ -316,7 +313,11 @@ def svd(entries: Sequence[Scalar | float], tolerance: float) -> list[Scalar | fl
     if program is None:
         raise NotImplementedError("the SVD of a constant matrix")
     node = program.op("svd", *entries, tolerance)
-    return [program.op("part", node, k) for k in range(21)]
+    return [program.op("part", node, k) for k in range(SVD_VALUES)]
+
+
+#: Values of an SVD node: U (9, row-major), S (3), Vh (9).
+SVD_VALUES = 21
 
 
 def _product(x, y):
@@ -341,6 +342,13 @@ def _clamp_magnitude(x, tol):
     up = select(apply("gt", x, tol), x, tol)
     down = select(apply("lt", x, -tol), x, -tol)
     return select(apply("ge", x, 0.0), up, down)
+
+
+def _svd_derivative(args: list, out: Scalar, grads: list) -> list:
+    """The local derivatives of an SVD node (``args``: its 9 entries, then the tolerance)."""
+    values = [apply("part", out, k) for k in range(SVD_VALUES)]
+    adjoint = _svd_adjoint(values, grads, args[9])
+    return [(k, None if _is(local, 0.0) else local) for k, local in enumerate(adjoint)]
 
 
 def _svd_adjoint(parts: list, grads: list, tolerance: float) -> list:
@@ -375,41 +383,12 @@ def _svd_adjoint(parts: list, grads: list, tolerance: float) -> list:
     return [x for row in _matmul(_matmul(U, inner), Vh) for x in row]
 
 
-# ---------------------------------------------------------------------------------- kernels
-
-
-def _emit(program: Program, wanted: Sequence[Scalar | float], inputs, parameters) -> list:
-    """Taichi expressions (inside a kernel being compiled) of the ``wanted`` values."""
-    needed = _needed(program, wanted)
-    values: dict[int, object] = {}
-
-    def value(plain):
-        return plain[1] if isinstance(plain, tuple) else values[plain]
-
-    for index in sorted(needed):
-        name, args = program.nodes[index]
-        if name == "input":
-            values[index] = inputs[args[0]]
-        elif name == "param":
-            values[index] = parameters[args[0]]
-        elif name == "svd":
-            values[index] = _emit_svd([value(a) for a in args[:9]])
-        elif name == "svd_saved":
-            start = int(args[10][1])
-            values[index] = inputs[start : start + 21]
-        elif name == "part":
-            values[index] = values[args[0]][int(args[1][1])]
-        else:
-            values[index] = impl.expr_init(_EMIT[name](*[value(a) for a in args]))
-    return [values[w.index] if isinstance(w, Scalar) else w for w in wanted]
-
-
-def _emit_svd(entries: list) -> list:
+def _emit_svd(entries: Sequence) -> list:
     """U (9), S (3), Vh (9) of the 3x3 matrix ``entries``, torch's convention (S >= 0)."""
     u, s, v = jacobi_svd(ti.Matrix([entries[0:3], entries[3:6], entries[6:9]]))
 
     def at(matrix, *index):  # what ``matrix[index]`` is in a kernel's own code
-        return impl.subscript(None, matrix, *index)
+        return _compat.element(matrix, *index)
 
     flip = at(s, 2) < 0  # jacobi_svd's U is a rotation: torch's makes S[2] >= 0 instead
     values = []
@@ -417,26 +396,20 @@ def _emit_svd(entries: list) -> list:
         values += [at(u, i, 0), at(u, i, 1), ti.select(flip, -at(u, i, 2), at(u, i, 2))]
     values += [at(s, 0), at(s, 1), ti.abs(at(s, 2))]
     values += [at(v, j, i) for i in range(3) for j in range(3)]
-    return [impl.expr_init(x) for x in values]
+    return [_compat.local(x) for x in values]
 
 
-def _select(c, a, b):
-    return ti.select(c != 0, a, b)
+# ------------------------------------------------------------------------------ operations
 
 
-_EMIT: dict[str, Callable] = {
-    "add": lambda a, b: a + b, "sub": lambda a, b: a - b, "mul": lambda a, b: a * b,
-    "div": lambda a, b: a / b, "neg": lambda a: -a, "powc": lambda a, b: _power(a, b),
-    "exp": ti.exp, "log": ti.log, "sqrt": ti.sqrt, "sin": ti.sin, "cos": ti.cos,
-    "tanh": ti.tanh, "abs": ti.abs,
-    "sign": lambda a: ti.select(a > 0, 1.0, 0.0) - ti.select(a < 0, 1.0, 0.0),
-    "select": _select,
-    "lt": lambda a, b: ti.select(a < b, 1.0, 0.0), "le": lambda a, b: ti.select(a <= b, 1.0, 0.0),
-    "gt": lambda a, b: ti.select(a > b, 1.0, 0.0), "ge": lambda a, b: ti.select(a >= b, 1.0, 0.0),
-    "eq": lambda a, b: ti.select(a == b, 1.0, 0.0), "ne": lambda a, b: ti.select(a != b, 1.0, 0.0),
-    "and": lambda a, b: ti.select((a != 0) & (b != 0), 1.0, 0.0),
-    "or": lambda a, b: ti.select((a != 0) | (b != 0), 1.0, 0.0),
-}  # fmt: skip
+def _sign(x: float) -> float:
+    return 1.0 if x > 0 else -1.0 if x < 0 else 0.0
+
+
+def _div(a: float, b: float) -> float:
+    if b == 0:
+        return math.nan if a == 0 or a != a else math.copysign(math.inf, a) * math.copysign(1, b)
+    return a / b
 
 
 def _power(a, exponent: float):
@@ -450,6 +423,104 @@ def _power(a, exponent: float):
     if exponent == -1:
         return 1.0 / a
     return ti.pow(a, exponent)
+
+
+def _unary(name: str, fold, emit, derivative=None) -> Operation:
+    """An operation of one argument, ATen's ``name`` (its ``default`` overload)."""
+    return Operation(1, fold, emit, derivative or _constant_almost_everywhere,
+                     aten=(f"aten.{name}.default",))  # fmt: skip
+
+
+def _comparison(name: str, compare: Callable[[Any, Any], Any]) -> Operation:
+    """1.0 where ``compare`` holds, else 0.0: ATen's ``name`` (its Scalar and Tensor forms)."""
+    return Operation(2, lambda a, b: float(compare(a, b)),
+                     lambda a, b: ti.select(compare(a, b), 1.0, 0.0),
+                     aten=(f"aten.{name}.Scalar", f"aten.{name}.Tensor"))  # fmt: skip
+
+
+#: Every operation of a program, by name: ``Operation(arity, fold, emit, derivative, ...)``. In
+#: a derivative, ``x`` is the list of the arguments, ``out`` the result and ``g`` its adjoint.
+OPERATIONS: dict[str, Operation] = {
+    "add": Operation(2, lambda a, b: a + b, lambda a, b: a + b,
+                     lambda x, out, g: [(0, g), (1, g)],
+                     aten=("aten.add.Tensor", "aten.add.Scalar")),
+    "sub": Operation(2, lambda a, b: a - b, lambda a, b: a - b,
+                     lambda x, out, g: [(0, g), (1, -g)],
+                     aten=("aten.sub.Tensor", "aten.sub.Scalar")),
+    "mul": Operation(2, lambda a, b: a * b, lambda a, b: a * b,
+                     lambda x, out, g: [(0, g * x[1]), (1, g * x[0])],
+                     aten=("aten.mul.Tensor", "aten.mul.Scalar")),
+    "div": Operation(2, _div, lambda a, b: a / b,
+                     lambda x, out, g: [(0, g / x[1]), (1, -g * x[0] / (x[1] * x[1]))],
+                     aten=("aten.div.Tensor", "aten.div.Scalar", "aten.div.Tensor_mode")),
+    # a power with a constant exponent
+    "powc": Operation(2, math.pow, _power,
+                      lambda x, out, g: [(0, 0.0 if x[1] == 0
+                                          else g * (x[1] * x[0] ** (x[1] - 1)))],
+                      aten=("aten.pow.Tensor_Scalar",), constants=(1,)),
+    "neg": _unary("neg", lambda a: -a, lambda a: -a, lambda x, out, g: [(0, -g)]),
+    "exp": _unary("exp", math.exp, ti.exp, lambda x, out, g: [(0, g * out)]),
+    "log": _unary("log", lambda a: -math.inf if a == 0 else math.log(a), ti.log,
+                  lambda x, out, g: [(0, g / x[0])]),
+    "sqrt": _unary("sqrt", math.sqrt, ti.sqrt, lambda x, out, g: [(0, g / (2.0 * out))]),
+    "sin": _unary("sin", math.sin, ti.sin, lambda x, out, g: [(0, g * apply("cos", x[0]))]),
+    "cos": _unary("cos", math.cos, ti.cos, lambda x, out, g: [(0, -g * apply("sin", x[0]))]),
+    "tanh": _unary("tanh", math.tanh, ti.tanh, lambda x, out, g: [(0, g * (1.0 - out * out))]),
+    # torch's: the gradient of abs at 0 is 0
+    "abs": _unary("abs", abs, ti.abs, lambda x, out, g: [(0, g * apply("sign", x[0]))]),
+    "sign": _unary("sign", _sign,
+                   lambda a: ti.select(a > 0, 1.0, 0.0) - ti.select(a < 0, 1.0, 0.0)),
+    # where(condition, a, b); a constant condition picks its branch, whatever the branches are
+    "select": Operation(3, lambda c, a, b: a if c else b, lambda c, a, b: ti.select(c != 0, a, b),
+                        lambda x, out, g: [(1, select(x[0], g, 0.0)), (2, select(x[0], 0.0, g))],
+                        aten=("aten.where.self",), fold_on=(0,)),
+    "lt": _comparison("lt", lambda a, b: a < b),
+    "le": _comparison("le", lambda a, b: a <= b),
+    "gt": _comparison("gt", lambda a, b: a > b),
+    "ge": _comparison("ge", lambda a, b: a >= b),
+    "eq": _comparison("eq", lambda a, b: a == b),
+    "ne": _comparison("ne", lambda a, b: a != b),
+    "and": Operation(2, lambda a, b: float(bool(a) and bool(b)),
+                     lambda a, b: ti.select((a != 0) & (b != 0), 1.0, 0.0),
+                     aten=("aten.logical_and.default",)),
+    "or": Operation(2, lambda a, b: float(bool(a) or bool(b)),
+                    lambda a, b: ti.select((a != 0) | (b != 0), 1.0, 0.0),
+                    aten=("aten.logical_or.default",)),
+    # the 9 entries of a 3x3 matrix (row-major), then the tolerance of its gradient's clamp;
+    # tasks.constitutive.law_kernel translates ATen's SVD, a matrix at a time
+    "svd": Operation(10, None, lambda *a: _emit_svd(a[:9]), _svd_derivative, constants=(9,),
+                     outputs=SVD_VALUES, local=False),
+    # in a reverse program, an SVD whose values the forward kernel saved: those are its last
+    # 21 arguments (inputs of the reverse kernel)
+    "svd_saved": Operation(10 + SVD_VALUES, None, lambda *a: list(a[10:]), _svd_derivative,
+                           constants=(9,), outputs=SVD_VALUES, local=False),
+    # value k (a constant) of a node of several values (its adjoint goes to that node's)
+    "part": Operation(2, None, lambda values, k: values[int(k)], constants=(1,), local=False),
+}  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------- kernels
+
+
+def _emit(program: Program, wanted: Sequence[Scalar | float], inputs, parameters) -> list:
+    """Taichi values (inside a kernel being compiled) of the ``wanted`` values."""
+    needed = _needed(program, wanted)
+    values: dict[int, object] = {}
+
+    def value(plain):
+        return plain[1] if isinstance(plain, tuple) else values[plain]
+
+    for index in sorted(needed):
+        name, args = program.nodes[index]
+        if name == "input":
+            values[index] = inputs[args[0]]
+        elif name == "param":
+            values[index] = parameters[args[0]]
+        else:
+            operation = OPERATIONS[name]
+            result = operation.emit(*[value(a) for a in args])
+            values[index] = _compat.local(result) if operation.local else result
+    return [values[w.index] if isinstance(w, Scalar) else w for w in wanted]
 
 
 class CompiledLaw:
@@ -479,12 +550,12 @@ class CompiledLaw:
         self.inputs, self.parameters = len(program.inputs), len(program.parameters)
         self.outputs = len(outputs)
         svds = [i for i in sorted(_needed(program, outputs)) if program.nodes[i][0] == "svd"]
-        saved = [program.op("part", Scalar(program, i), k) for i in svds for k in range(21)]
+        saved = [program.op("part", Scalar(program, i), k) for i in svds for k in range(SVD_VALUES)]
         self.saved = len(saved)
         # the reverse's inputs: the law's, dL/d(output) (one per output), the saved SVDs
         first = self.inputs + self.outputs
         reverse = Program(first + self.saved, self.parameters)
-        offsets = {svd: first + 21 * j for j, svd in enumerate(svds)}
+        offsets = {svd: first + SVD_VALUES * j for j, svd in enumerate(svds)}
         rebuilt = _replay(program, reverse, outputs, offsets)
         grads = reverse.gradients(rebuilt, reverse.inputs[self.inputs : first],
                                   reverse.inputs[: self.inputs] + reverse.parameters)  # fmt: skip
@@ -494,9 +565,8 @@ class CompiledLaw:
                                 "compiled_law_forward")  # fmt: skip
         self._reverse = _kernel(reverse, grads, first + self.saved, self.parameters,
                                 "compiled_law_reverse")  # fmt: skip
-        kernels = [k for w in (self._forward, self._reverse) for k in (w._primal, w._adjoint)]
         #: forgets the kernels in Taichi's runtime once this law is collected (or released)
-        self.release = weakref.finalize(self, _forget, kernels)
+        self.release = weakref.finalize(self, _compat.forget, [self._forward, self._reverse])
         _compile(self._forward, self.inputs, self.parameters, self.outputs + self.saved)
         _compile(self._reverse, first + self.saved, self.parameters, self.inputs + self.parameters)
 
@@ -515,18 +585,6 @@ class CompiledLaw:
         grads = x.new_empty(x.shape[0], self.inputs + self.parameters)
         self._reverse(rows, parameters, grads)
         return grads[:, : self.inputs], grads[:, self.inputs :].sum(0)
-
-
-def _forget(kernels: list) -> None:
-    """Remove ``kernels`` (Taichi ``Kernel`` objects) from Taichi's Python runtime and drop
-    their compiled handles: what Taichi 1.7 allows to free of a kernel (its C++ side stays)."""
-    listed = impl.get_runtime().kernels
-    for kernel in kernels:
-        kernel.compiled_kernels.clear()
-        for index, other in enumerate(listed):
-            if other is kernel:
-                del listed[index]
-                break
 
 
 def _needed(program: Program, wanted: Sequence[Scalar | float]) -> set[int]:
@@ -558,7 +616,8 @@ def _replay(source: Program, target: Program, outputs: Sequence[Scalar | float],
         else:
             plain = [a[1] if isinstance(a, tuple) else values[a] for a in args]
             if index in saved:
-                name, plain = "svd_saved", [*plain, saved[index]]
+                start = saved[index]
+                name, plain = "svd_saved", [*plain, *target.inputs[start : start + SVD_VALUES]]
             values.append(target.op(name, *plain))
     return [values[o.index] if isinstance(o, Scalar) else o for o in outputs]
 
@@ -581,11 +640,11 @@ def _kernel(program: Program, wanted: list, width: int, parameters: int, name: s
 
 
 def _write(program, wanted, rows, params, out, p, width, parameters, count) -> None:
-    inputs = [impl.subscript(None, rows, p, k) for k in range(width)]
-    values = [impl.subscript(None, params, k) for k in range(parameters)]
+    inputs = [_compat.element(rows, p, k) for k in range(width)]
+    values = [_compat.element(params, k) for k in range(parameters)]
     results = _emit(program, wanted, inputs, values)
     for k in range(count):
-        impl.subscript(None, out, p, k)._assign(results[k])
+        _compat.store(_compat.element(out, p, k), results[k])
 
 
 def _compile(kernel, width: int, parameters: int, outputs: int) -> None:
@@ -596,15 +655,10 @@ def _compile(kernel, width: int, parameters: int, outputs: int) -> None:
     a law's kernels are compiled for the law at hand, so none is written to disk (a search
     would otherwise add two files to the user's cache per candidate)."""
     dtype = torch_dtype()
-    config = impl.current_cfg()
-    cached, config.offline_cache = config.offline_cache, False
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", category=SyntaxWarning)
-            kernel(torch.zeros(1, width, dtype=dtype), torch.zeros(max(parameters, 1), dtype=dtype),
-                   torch.zeros(1, outputs, dtype=dtype))  # fmt: skip
-    finally:
-        config.offline_cache = cached
+    with _compat.without_offline_cache(), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=SyntaxWarning)
+        kernel(torch.zeros(1, width, dtype=dtype), torch.zeros(max(parameters, 1), dtype=dtype),
+               torch.zeros(1, outputs, dtype=dtype))  # fmt: skip
 
 
 def flat_parameters(parameters: Sequence[torch.Tensor], like: torch.Tensor) -> torch.Tensor:
@@ -657,7 +711,11 @@ class _LawFunction(torch.autograd.Function):
                                             grad.reshape(rows.shape[0], -1))  # fmt: skip
         pieces = split_parameters(grad_flat, parameters)
         unused = split_parameters(torch.tensor(law.constant_zero), parameters)
-        return (grad_rows.reshape(ctx.shape), None, *[
-            None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
-            for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
-        ])
+        return (
+            grad_rows.reshape(ctx.shape),
+            None,
+            *[
+                None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
+                for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
+            ],
+        )

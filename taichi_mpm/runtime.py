@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import taichi as ti
 
+from taichi_mpm import _compat, front_end
 from taichi_mpm.spare_cores import SpareCores
 
 _ARCHS = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "gpu": ti.gpu}
@@ -73,6 +74,8 @@ def init(
         Passed through to ``ti.init``.
 
     Calling ``init`` again re-initialises Taichi: every existing simulator becomes invalid.
+    It also installs the short source positions of :mod:`taichi_mpm.front_end` (a hook on
+    Taichi's front end, which nothing installs on import).
     """
     global _current
     if arch not in _ARCHS:
@@ -87,9 +90,10 @@ def init(
         log_level=taichi_options.pop("log_level", ti.WARN),
         **taichi_options,
     )
-    backend = ti.lang.impl.current_cfg().arch.name  # no public accessor in Taichi 1.7
+    _compat.shorten_source_positions(front_end.is_short)
+    backend = _compat.arch_name()
     backend = "cpu" if backend in ("x64", "arm64") else backend
-    threads = ti.lang.impl.current_cfg().cpu_max_num_threads
+    threads = _compat.cpu_threads()
     _current = RuntimeInfo(arch=arch, precision=precision, backend=backend, threads=threads)
     return _current
 

@@ -11,7 +11,9 @@ for code paths no test happens to run:
 - the search core (:mod:`sga_agent.search`) imports no report module, and the report does not
   import the search core;
 - ``taichi_mpm`` imports neither torch nor anything of ours; ``bridges`` imports neither
-  ``tasks`` nor ``sga_agent``.
+  ``tasks`` nor ``sga_agent``;
+- Taichi's private API (``taichi.lang``) is reached by :mod:`taichi_mpm._compat` alone, neither
+  imported nor read as an attribute (``ti.lang``) anywhere else in the project's code.
 """
 
 from __future__ import annotations
@@ -119,6 +121,28 @@ def test_the_protocol_package_imports_only_the_standard_library():
             if not within(module, PROTOCOL) and module.split(".")[0] != "__future__"
         }  # fmt: skip
         assert {module.split(".")[0] for module in outside} <= set(sys.stdlib_module_names), path
+
+
+#: The project's code (the tests may reach anywhere).
+CODE = ("taichi_mpm", "bridges", "tasks", "sga_agent", "benchmarks", "scripts", "examples")
+COMPAT = "taichi_mpm._compat"
+
+
+def taichi_internals(path: Path) -> list[int]:
+    """Lines of ``path`` that import ``taichi.lang`` or read it as ``ti.lang``/``taichi.lang``."""
+    lines = [line for line, module in imports(path) if within(module, "taichi.lang")]
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        names_taichi = isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+        if names_taichi and node.value.id in ("ti", "taichi") and node.attr == "lang":
+            lines.append(node.lineno)
+    return lines
+
+
+def test_only_the_compat_module_reaches_into_taichi_s_internals():
+    found = [f"{path.relative_to(ROOT)}:{line}" for package in CODE for path in sources(package)
+             if module_name(path) != COMPAT for line in taichi_internals(path)]  # fmt: skip
+    assert found == []
+    assert taichi_internals(ROOT / "taichi_mpm" / "_compat.py")  # the check sees what it looks for
 
 
 @pytest.mark.parametrize("package", ["sga_agent", "tasks", "taichi_mpm", "bridges"])

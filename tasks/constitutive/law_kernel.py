@@ -190,22 +190,26 @@ def _scaled(value: Any, alpha: Any) -> Any:
     return value if alpha == 1 else _elementwise(lambda a: sl.apply("mul", a, alpha), value)
 
 
-def _add(a, b, alpha=1):
-    return _op("add")(a, _scaled(b, alpha))
+def _lifted(name: str, operation: sl.Operation) -> Callable:
+    """The rule of an ATen overload that is ``operation`` applied element-wise: ATen's
+    ``alpha`` scales the second argument first (add, sub), a ``rounding_mode`` (div) is
+    refused, and so is a tensor where the operation takes a constant (a power's exponent)."""
 
+    def rule(*args, alpha=1, rounding_mode=None):
+        if rounding_mode is not None:
+            raise NotImplementedError("rounding division")
+        for position in operation.constants:
+            if position < len(args) and isinstance(args[position], np.ndarray):
+                raise NotImplementedError(f"a tensor as argument {position} of {name}")
+        if alpha != 1:
+            args = (args[0], _scaled(args[1], alpha), *args[2:])
+        return _op(name)(*args)
 
-def _sub(a, b, alpha=1):
-    return _op("sub")(a, _scaled(b, alpha))
+    return rule
 
 
 def _rsub(a, b, alpha=1):
     return _op("sub")(b, _scaled(a, alpha))
-
-
-def _div(a, b, rounding_mode=None):
-    if rounding_mode is not None:
-        raise NotImplementedError("rounding division")
-    return _op("div")(a, b)
 
 
 def _clamp(x, min=None, max=None):  # noqa: A002 - ATen's names
@@ -228,12 +232,6 @@ def _maximum(a, b, larger=True):
         return sl.select(first, x, sl.select(second, y, tie))
 
     return _elementwise(one, a, b)
-
-
-def _pow(x, exponent):
-    if isinstance(exponent, np.ndarray):
-        raise NotImplementedError("a tensor exponent")
-    return _elementwise(lambda a: sl.apply("powc", a, float(exponent)), x)
 
 
 def _axes(x: np.ndarray, dims: Any) -> tuple[int, ...]:
@@ -424,41 +422,23 @@ def _new(value):
     return lambda x, size, *_, **__: _allocated(size, value)
 
 
-def _unary(name: str) -> Callable:
-    return lambda x: _op(name)(x)
-
-
-def _compare(name: str) -> Callable:
-    return lambda a, b: _op(name)(a, b)
-
-
-_UNARY = {
-    "neg": "neg", "exp": "exp", "log": "log", "sqrt": "sqrt", "sin": "sin", "cos": "cos",
-    "tanh": "tanh", "abs": "abs", "sign": "sign",
-}  # fmt: skip
-
+#: How each ATen operation a law graph may hold is written out: those that are one operation
+#: of the program element-wise as its table entry says (``bridges.scalar_law.OPERATIONS``),
+#: the others as compositions of them or as reshaping of the arrays.
 RULES: dict[str, Callable] = {
-    **{f"aten.{name}.default": _unary(op) for name, op in _UNARY.items()},
-    **{f"aten.{name}.{kind}": _compare(name) for name in ("lt", "le", "gt", "ge", "eq", "ne")
-       for kind in ("Scalar", "Tensor")},  # fmt: skip
-    "aten.add.Tensor": _add, "aten.add.Scalar": _add,
-    "aten.sub.Tensor": _sub, "aten.sub.Scalar": _sub,
+    **{overload: _lifted(name, operation) for name, operation in sl.OPERATIONS.items()
+       for overload in operation.aten},
     "aten.rsub.Scalar": _rsub, "aten.rsub.Tensor": _rsub,
-    "aten.mul.Tensor": _op("mul"), "aten.mul.Scalar": _op("mul"),
-    "aten.div.Tensor": _div, "aten.div.Scalar": _div, "aten.div.Tensor_mode": _div,
     "aten.reciprocal.default": lambda x: _op("div")(1.0, x),
     "aten.rsqrt.default": lambda x: _op("div")(1.0, _op("sqrt")(x)),
     "aten.square.default": lambda x: _op("mul")(x, x),
     "aten.sigmoid.default": lambda x: _op("div")(1.0, _op("add")(1.0, _op("exp")(_op("neg")(x)))),
-    "aten.pow.Tensor_Scalar": _pow,
     "aten.relu.default": _relu,
     "aten.clamp.default": _clamp, "aten.clip.default": _clamp, "aten.clamp.Tensor": _clamp,
     "aten.clamp_min.default": lambda x, m: _clamp(x, m, None),
     "aten.clamp_max.default": lambda x, m: _clamp(x, None, m),
     "aten.maximum.default": _maximum,
     "aten.minimum.default": lambda a, b: _maximum(a, b, larger=False),
-    "aten.where.self": lambda c, a, b: _elementwise(sl.select, c, a, b),
-    "aten.logical_and.default": _compare("and"), "aten.logical_or.default": _compare("or"),
     "aten.sum.dim_IntList": _sum, "aten.sum.default": lambda x, **_: _sum(x),
     "aten.mean.dim": _mean, "aten.mean.default": lambda x, **_: _mean(x),
     "aten._softmax.default": _softmax,

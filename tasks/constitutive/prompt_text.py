@@ -1,8 +1,17 @@
 """Task-specific prompt text of the constitutive-law tasks (our wording).
 
 The structure follows the paper's prompts: who the model is, what is observed and searched, the
-code skeleton a proposal must follow, and rules and tips for the code.
+code skeleton a proposal must follow, and rules and tips for the code. The seed laws are read
+from ``examples/seeds`` (code the model sees as written, kept where code is kept).
 """
+
+from importlib import resources
+
+
+def _seed(name: str) -> str:
+    """The code of the seed law ``name`` of ``examples/seeds``."""
+    return (resources.files(__package__) / "seeds" / name).read_text(encoding="utf-8")
+
 
 ROLE = (
     "You are an expert in continuum mechanics, material science, physical simulation and "
@@ -106,43 +115,7 @@ PLASTIC_RULES = _COMMON_RULES + (
     "means no plasticity; plasticity is only worth adding when the feedback calls for it."
 )
 
-ELASTIC_SEED = '''import torch
-import torch.nn as nn
-
-
-class Physics(nn.Module):
-    def __init__(self, log_youngs_modulus: float = 10.0, poissons_ratio: float = 0.13):
-        """Linear (small-strain) elasticity.
-
-        Args:
-            log_youngs_modulus (float): natural log of Young's modulus in Pa.
-            poissons_ratio (float): Poisson's ratio.
-        """
-        super().__init__()
-        self.log_youngs_modulus = nn.Parameter(torch.tensor(log_youngs_modulus))
-        self.poissons_ratio = nn.Parameter(torch.tensor(poissons_ratio))
-
-    def forward(self, F: torch.Tensor) -> torch.Tensor:
-        E = torch.exp(self.log_youngs_modulus)  # ()
-        nu = self.poissons_ratio  # ()
-        mu = E / (2 * (1 + nu))  # ()
-        lam = E * nu / ((1 + nu) * (1 - 2 * nu))  # ()
-        eye = torch.eye(3, dtype=F.dtype).expand_as(F)  # (B, 3, 3)
-        strain = 0.5 * (F + F.transpose(-2, -1)) - eye  # (B, 3, 3)
-        trace = strain.diagonal(dim1=-2, dim2=-1).sum(-1).view(-1, 1, 1)  # (B, 1, 1)
-        piola = 2 * mu * strain + lam * trace * eye  # (B, 3, 3)
-        return piola @ F.transpose(-2, -1)  # Kirchhoff stress (B, 3, 3)
-'''
-
-PLASTIC_SEED = '''import torch
-import torch.nn as nn
-
-
-class Physics(nn.Module):
-    def __init__(self):
-        """No plasticity: a purely elastic material."""
-        super().__init__()
-
-    def forward(self, F: torch.Tensor) -> torch.Tensor:
-        return F  # the trial deformation gradient is kept (B, 3, 3)
-'''
+#: The seeds: the laws a search starts from, shown to the model as its first solution. They
+#: live in ``examples/seeds``; ``seeds`` here links to it (a wheel holds the files themselves).
+ELASTIC_SEED = _seed("linear_elastic.py")
+PLASTIC_SEED = _seed("no_plasticity.py")

@@ -60,21 +60,15 @@ def test_taichi_takes_the_product_only_where_it_is_faster():
 
 
 ONE_THREAD = """
-import taichi.lang.kernel_impl as kernel_impl
 import torch
 import taichi_mpm
 from bridges import products
+from taichi_mpm import _compat
 
 taichi_mpm.init(arch="cpu", precision="float32")
 products.compile_kernels(torch.float32)
 compiled = []
-materialize = kernel_impl.Kernel.materialize
-def counting(self, *args, **kwargs):
-    key = kwargs.get("key", args[0] if args else None)
-    if key not in self.compiled_kernels:
-        compiled.append(self.func.__name__)
-    return materialize(self, *args, **kwargs)
-kernel_impl.Kernel.materialize = counting
+_compat.on_compile(compiled.append)
 F = torch.randn(products.MIN_BATCH, 3, 3, requires_grad=True)
 s = torch.rand(products.MIN_BATCH, 3)
 U, V = torch.linalg.qr(torch.randn(2, products.MIN_BATCH, 3, 3)).Q

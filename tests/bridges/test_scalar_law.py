@@ -8,13 +8,15 @@ at zero), and pass finite differences.
 """
 
 import gc
+import itertools
+import math
 
 import numpy as np
 import pytest
 import torch
-from taichi.lang import impl
 
 from bridges import scalar_law as sl
+from taichi_mpm import _compat
 
 EYE = torch.eye(3, dtype=torch.float64)
 
@@ -125,7 +127,7 @@ def test_a_law_without_parameters_and_constant_outputs():
 
 
 def test_a_collected_law_leaves_its_kernels_out_of_taichi_s_runtime():
-    kernels = impl.get_runtime().kernels
+    kernels = _compat.runtime_kernels()
     before = len(kernels)
     program = sl.Program(9, 1)
     law = sl.CompiledLaw(program, [x * program.parameters[0] for x in program.inputs])
@@ -144,3 +146,90 @@ def test_constants_fold_and_equal_operations_are_made_once():
     assert x * 1.0 is x and x + 0.0 is x
     with pytest.raises(TypeError, match="no truth value"):
         bool(x > 0.0)
+
+
+# ------------------------------------------------------------------ the table of operations
+
+#: Every operation of one value that folds on constants: what the element-wise ones are.
+ELEMENTWISE = {name: op for name, op in sl.OPERATIONS.items() if op.outputs == 1 and op.fold}
+
+
+def _cases() -> list[tuple[str, tuple]]:
+    """Each element-wise operation on every choice of its arguments among three inputs (x0,
+    x1 in [0.5, 2], x2 = 0: both branches of a select, a zero for and/or), a constant 2.5
+    where it takes a constant; each case as (name, the inputs' indices or the constant)."""
+    return [(name, args) for name, op in ELEMENTWISE.items()
+            for args in itertools.product(*[[2.5] if k in op.constants else [0, 1, 2]
+                                            for k in range(op.arity)])]  # fmt: skip
+
+
+def _value(name: str, args: tuple, x: list[float]) -> float:
+    """The operation's fold on the row ``x``: Python's IEEE double."""
+    return sl.apply(name, *[a if isinstance(a, float) else x[a] for a in args])
+
+
+def _central_differences(name: str, args: tuple, x: list[float], h: float = 1e-6) -> list:
+    """d/dx0 and d/dx1 of the operation's fold at the row ``x``."""
+    grads = []
+    for k in range(2):
+        plus, minus = list(x), list(x)
+        plus[k] += h
+        minus[k] -= h
+        grads.append((_value(name, args, plus) - _value(name, args, minus)) / (2 * h))
+    return grads
+
+
+def _compiled(cases: list[tuple[str, tuple]]) -> sl.CompiledLaw:
+    program = sl.Program(9, 0)
+    return sl.CompiledLaw(program, [
+        sl.apply(name, *[a if isinstance(a, float) else program.inputs[a] for a in args])
+        for name, args in cases
+    ])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def rows() -> torch.Tensor:
+    """x0, x1 in [0.5, 2], x2 = 0 (and the rest)."""
+    rows = torch.zeros(5, 9, dtype=torch.float64)
+    generator = torch.Generator().manual_seed(4)
+    rows[:, :2] = 0.5 + 1.5 * torch.rand(5, 2, generator=generator, dtype=torch.float64)
+    return rows
+
+
+def test_every_operation_s_kernel_computes_its_fold(rows):
+    """One entry of the table is one operation: its Taichi code computes its fold."""
+    cases = _cases()
+    out = _compiled(cases).forward(rows, sl.flat_parameters([], rows))
+    expected = torch.tensor([[_value(name, args, row.tolist()) for name, args in cases]
+                             for row in rows], dtype=torch.float64)  # fmt: skip
+    # where x2 = 0 makes a fold infinite or NaN, Taichi's fast math may differ (x2 / x2 is 1)
+    finite = expected.isfinite()
+    assert finite.float().mean() > 0.9
+    torch.testing.assert_close(out[:, : len(cases)][finite], expected[finite], rtol=1e-12,
+                               atol=1e-12)  # fmt: skip
+
+
+def test_every_operation_s_derivative_is_its_fold_s_central_differences(rows):
+    """The reverse kernel's dL/dx0 and dL/dx1 of each case on its own (one row per row and
+    case, its seed one-hot), where the fold is smooth in x0 and x1 on every row (a division
+    by x2 = 0 is left out: its infinite local derivative, times a zero seed, would make every
+    other case's gradient NaN in the same reverse)."""
+    numeric = {case: [_central_differences(*case, row.tolist()) for row in rows]
+               for case in _cases()}  # fmt: skip
+    cases = [case for case, grads in numeric.items() if math.isfinite(sum(sum(grads, [])))]
+    assert len(cases) > 0.9 * len(numeric)
+    law = _compiled(cases)
+    flat = sl.flat_parameters([], rows)
+    saved = law.forward(rows, flat)[:, len(cases) :].repeat_interleave(len(cases), 0)
+    seeds = torch.eye(len(cases), dtype=torch.float64).repeat(len(rows), 1)
+    dx, _ = law.backward(rows.repeat_interleave(len(cases), 0), flat, saved, seeds)
+    expected = torch.tensor([numeric[case] for case in cases], dtype=torch.float64).transpose(0, 1)
+    torch.testing.assert_close(dx[:, :2].reshape(len(rows), len(cases), 2), expected, rtol=0,
+                               atol=1e-6)  # fmt: skip
+
+
+def test_every_aten_overload_of_the_table_is_one_of_aten():
+    for name, op in sl.OPERATIONS.items():
+        for overload in op.aten:
+            namespace, packet, kind = overload.split(".")
+            assert namespace == "aten" and hasattr(getattr(torch.ops.aten, packet), kind), name

@@ -1,7 +1,10 @@
 """Short source positions for registered folders: errors still name the file, line and code;
-kernels elsewhere keep Taichi's positions with carets."""
+kernels elsewhere keep Taichi's positions with carets; the hook is installed by
+``taichi_mpm.init``, never by an import."""
 
 import importlib.util
+import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -54,3 +57,29 @@ def test_other_folders_keep_taichis_carets(tmp_path):
     message = _compile_error(kernel)
     assert "line 7" in message and "undefined_in_front_end_full" in message
     assert "^^^" in message
+
+
+NOTHING_AT_IMPORT = """
+import json
+
+from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
+from taichi.lang.kernel_impl import Kernel
+
+def hooks():
+    return [ASTTransformerContext.get_pos_info, Kernel.__call__, Kernel.materialize]
+
+before = hooks()
+import bridges.kernels, bridges.scalar_law, taichi_mpm, taichi_mpm.kernels
+imported = hooks()
+taichi_mpm.init(arch="cpu")
+started = hooks()
+print(json.dumps({"import": imported == before,
+                  "init": [a is b for a, b in zip(started, before)]}))
+"""
+
+
+def test_importing_the_project_changes_nothing_in_taichi_and_init_installs_the_hook():
+    out = subprocess.run([sys.executable, "-c", NOTHING_AT_IMPORT], capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result == {"import": True, "init": [False, True, True]}

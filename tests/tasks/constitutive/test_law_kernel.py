@@ -14,9 +14,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from bridges import scalar_law
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
-from tasks.constitutive import law_kernel
+from tasks.constitutive import law_kernel, law_ops
 from tasks.constitutive.law_capture import capture_law
 from tasks.constitutive.law_graph import build_law
 from tasks.constitutive.options import ConstitutiveOptions
@@ -102,6 +103,13 @@ def test_compiled_laws_equal_their_torch_graphs(code):
         torch.testing.assert_close(mine, theirs, rtol=1e-10, atol=1e-10)
 
 
+def test_every_overload_of_the_operations_table_may_appear_in_a_graph():
+    """An operation's ATen overloads are translated by its entry; a graph may hold them."""
+    overloads = [name for op in scalar_law.OPERATIONS.values() for name in op.aten]
+    assert len(overloads) > 30 and all(law_ops.is_allowed(name) for name in overloads)
+    assert set(overloads) <= set(law_kernel.RULES)
+
+
 def test_a_law_with_an_svd_is_compiled_only_when_asked():
     law = _law((EXAMPLES / "von_mises.py").read_text())
     with pytest.raises(law_kernel.Untranslatable, match="svd"):
@@ -129,9 +137,10 @@ FLOAT32_CHECK = r"""
 import json, sys, torch
 import taichi_mpm as tm
 tm.init(arch="cpu", precision="float32")
+from bridges import scalar_law
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
-from tasks.constitutive import law_kernel
+from tasks.constitutive import law_kernel, law_ops
 from tasks.constitutive.law_graph import build_law
 from tasks.constitutive.options import ConstitutiveOptions
 report = {}
