@@ -13,7 +13,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
 
@@ -21,10 +21,15 @@ from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
 @dataclass(frozen=True)
 class DoubleOptions:
     """The doubles' options: ``label``, any text, reported back with the settings; ``notes``,
-    the file :class:`StagedWarmingTask` notes its warm-up stages in."""
+    the file :class:`StagedWarmingTask` notes its warm-up stages in. ``built`` counts the
+    objects this process has built."""
 
     label: str = ""
     notes: str | None = None
+    built: ClassVar[int] = 0
+
+    def __post_init__(self) -> None:
+        DoubleOptions.built += 1
 
 
 class ExecTask:
@@ -72,7 +77,8 @@ class ExecTask:
 
 class WarmingTask(ExecTask):
     """:class:`ExecTask` whose fit worker warms up first; its evaluations report the options
-    the warm-up was given (their type's name and fields) and the fit worker's process id."""
+    the warm-up was given (their type's name and fields), how many options objects the fit
+    worker has built and its process id."""
 
     warmed_with: dict[str, Any] | None = None
 
@@ -81,7 +87,8 @@ class WarmingTask(ExecTask):
 
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         evaluation = super().evaluate(data, settings)
-        evaluation.extras.update(warmed_with=WarmingTask.warmed_with, fit_pid=os.getpid())
+        evaluation.extras.update(warmed_with=WarmingTask.warmed_with, fit_pid=os.getpid(),
+                                 options_built=DoubleOptions.built)  # fmt: skip
         return evaluation
 
 

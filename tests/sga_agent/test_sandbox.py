@@ -310,6 +310,16 @@ def test_the_fit_worker_warms_up_once_before_its_first_candidate():
     assert first.extras["fit_pid"] == second.extras["fit_pid"]
 
 
+def test_a_fit_worker_builds_its_options_object_once_for_all_its_evaluations():
+    task = "tests.sga_agent.doubles:WarmingTask"
+    settings = EvaluationSettings(options=DoubleOptions(label="once"))
+    with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        evaluations = pool.map(task, [f"loss = {i}.0\n" for i in range(3)], settings)
+    assert len({e.extras["fit_pid"] for e in evaluations}) == 1  # one worker evaluated them
+    assert [e.extras["options_built"] for e in evaluations] == [1, 1, 1]
+    assert all(e.extras["settings"]["options"]["label"] == "once" for e in evaluations)
+
+
 def _staged_fit_worker(notes: Path) -> tuple[subprocess.Popen, str]:
     """A fit worker of StagedWarmingTask, started with one request already waiting."""
     sent = FitSettings.of(EvaluationSettings(options=DoubleOptions(notes=str(notes))))
