@@ -198,12 +198,16 @@ class ExecutorConfig:
 @dataclass(frozen=True)
 class Budgets:
     """Limits at which a run stops cleanly (None: none): ``max_usd`` spent on the model,
-    ``max_tokens`` it used, ``max_evaluations`` run. A budget is a field here and a line in
-    :meth:`spent_of`; the loop checks them all through :meth:`exceeded`."""
+    ``max_tokens`` it used, ``max_evaluations`` run, ``max_seconds`` of wall time (over all
+    the run's sessions, a resume included). A budget is a field here and a line in
+    :meth:`spent_of`; the loop checks them all through :meth:`exceeded`, before each
+    iteration, each request to the proposer and each evaluation it submits (evaluations
+    already submitted finish)."""
 
     max_usd: float | None = None
     max_tokens: int | None = None
     max_evaluations: int | None = None
+    max_seconds: float | None = None
 
     def __post_init__(self) -> None:
         for name, limit in vars(self).items():
@@ -217,11 +221,15 @@ class Budgets:
             "max_usd": totals.cost_usd,
             "max_tokens": totals.tokens,
             "max_evaluations": totals.evaluations,
+            "max_seconds": totals.seconds,
         }
 
-    def exceeded(self, totals: Totals) -> str:
-        """The first budget ``totals`` has reached, as "max_usd=5.0 reached"; "" if none."""
+    def exceeded(self, totals: Totals, names: tuple[str, ...] | None = None) -> str:
+        """The first budget (of ``names``; default all) ``totals`` has reached, as
+        "max_usd=5.0 reached"; "" if none."""
         for name, spent in self.spent_of(totals).items():
+            if names is not None and name not in names:
+                continue
             limit = getattr(self, name)
             if limit is not None and spent >= limit:
                 return f"{name}={limit} reached"

@@ -65,11 +65,13 @@ _HELD: dict[Path, IO[str]] = {}
 
 @dataclass
 class Recorded:
-    """What a run folder already holds: model answers and evaluations, by candidate id."""
+    """What a run folder already holds: model answers and evaluations, by candidate id, and
+    the wall seconds its searches ran (each from its ``search_started`` to its last event)."""
 
     proposals: dict[str, dict[str, Any]] = field(default_factory=dict)
     evaluations: dict[str, Evaluation] = field(default_factory=dict)
     finished: bool = False
+    seconds: float = 0.0
 
 
 def _json_default(value: Any) -> Any:
@@ -217,14 +219,23 @@ class RunStore:
 
     def recorded(self) -> Recorded:
         recorded = Recorded()
+        started = last = None  # the current search's first and latest event times
         for event in self.events():
             kind = event.get("type")
+            moment = event.get("time")
+            if kind == ev.SearchStarted.type:
+                if started is not None and last is not None:
+                    recorded.seconds += last - started
+                started = moment
+            last = moment if isinstance(moment, (int, float)) else last
             if kind == ev.ProposalReceived.type:
                 recorded.proposals[event["candidate"]] = event["proposal"]
             elif kind == ev.CandidateEvaluated.type:
                 recorded.evaluations[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
             elif kind == ev.RunFinished.type:
                 recorded.finished = True
+        if started is not None and last is not None:
+            recorded.seconds += last - started
         return recorded
 
     # ------------------------------------------------------------------ artefacts

@@ -10,7 +10,9 @@ asking the model again or re-evaluating what was finished.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
@@ -39,11 +41,12 @@ class Evaluator(Protocol):
 
 @dataclass
 class Totals:
-    """Tokens, money and evaluations spent so far."""
+    """Tokens, money, evaluations and wall seconds spent so far."""
 
     tokens: int = 0
     cost_usd: float = 0.0
     evaluations: int = 0
+    seconds: float = 0.0
     valid: int = 0
     invalid: int = 0
 
@@ -110,7 +113,9 @@ class Search:
         self._evaluations = recorded.evaluations
         self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self.heap = SolutionHeap()
-        self.totals = Totals()
+        self.totals = Totals(seconds=recorded.seconds)
+        self._seconds_before = recorded.seconds  # the run's earlier sessions
+        self._started = time.monotonic()
         self.settings: EvaluationSettings = config.evaluation_settings()
 
     # ------------------------------------------------------------------ the loop
@@ -128,7 +133,7 @@ class Search:
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
         for iteration in range(1, self.loop.iterations + 1):
-            stopped = self.config.budgets.exceeded(self.totals)
+            stopped = self._budget_reached()
             if stopped:
                 break
             self._emit(ev.IterationStarted(iteration))
@@ -171,7 +176,7 @@ class Search:
         prompt = functools.cache(functools.partial(self._messages, shown))
         parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
         for temperature, candidates in missing.items():
-            if self.config.budgets.exceeded(self.totals):
+            if self._budget_reached():
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
             request = ProposalRequest(candidates, temperature, seed, parents, prompt)
@@ -243,9 +248,8 @@ class Search:
                 if candidate not in self._evaluations:
                     self._store(candidate, code, rejection)
             elif not known and key not in submitted:
-                limit = self.config.budgets.max_evaluations
-                if limit is not None and self.totals.evaluations + len(submitted) >= limit:
-                    stopped = f"max_evaluations={limit} reached"
+                stopped = self._submission_refused(len(submitted))
+                if stopped:
                     break
                 submitted.add(key)
                 pending[self.evaluator.submit(self.config.task, code, self.settings)] = (
@@ -287,6 +291,19 @@ class Search:
         )  # fmt: skip
 
     # ------------------------------------------------------------------ bookkeeping
+
+    def _budget_reached(self) -> str:
+        """The budget the run has reached ("" if none)."""
+        self.totals.seconds = self._seconds_before + time.monotonic() - self._started
+        return self.config.budgets.exceeded(self.totals)
+
+    def _submission_refused(self, submitted: int) -> str:
+        """The budget that forbids submitting one more evaluation, with ``submitted`` of this
+        batch still running ("" if none): evaluations and wall time only (the answers at
+        hand are paid for already)."""
+        self._budget_reached()
+        spent = dataclasses.replace(self.totals, evaluations=self.totals.evaluations + submitted)
+        return self.config.budgets.exceeded(spent, ("max_evaluations", "max_seconds"))
 
     def _emit(self, event: ev.Event) -> None:
         """Record ``event``, then show it (as its dict, with the totals) to ``on_event``."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from typing import Any
 
@@ -10,6 +11,29 @@ import click
 from sga_agent import registry, runner
 from sga_agent.options import OptionError
 from sga_agent.task import TaskBase
+
+_DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
+
+
+class Duration(click.ParamType):
+    """A wall time as ``15m``, ``1h30m``, ``90s`` or a number of seconds; its value is the
+    seconds, a float."""
+
+    name = "duration"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None):
+        if isinstance(value, (int, float)):
+            seconds = float(value)
+        else:
+            match = _DURATION.fullmatch(str(value).strip().lower())
+            if match is None or not any(match.groups()):
+                self.fail(f"{value!r} is not a duration: write e.g. 15m, 1h30m, 90s or 900",
+                          param, ctx)  # fmt: skip
+            hours, minutes, rest = (float(part or 0) for part in match.groups())
+            seconds = 3600 * hours + 60 * minutes + rest
+        if not seconds > 0:
+            self.fail(f"{value!r} is not a positive duration", param, ctx)
+        return seconds
 
 
 def key_value_options(items: Iterable[str]) -> dict[str, str]:

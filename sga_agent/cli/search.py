@@ -11,7 +11,12 @@ from rich.console import Console
 from sga_agent import registry, runner
 from sga_agent.cli import main
 from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
-from sga_agent.cli.options import registered_task, task_options, typed_task_options
+from sga_agent.cli.options import (
+    Duration,
+    registered_task,
+    task_options,
+    typed_task_options,
+)
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig, default
 from sga_agent.proposers.base import Proposer, ProposerError
@@ -117,6 +122,9 @@ def from_preset(name: str) -> str:
 @click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
+@click.option("--time-budget", "max_seconds", type=Duration(),
+              help="Budget in wall time, e.g. 15m or 1h30m (a resume counts the time the run "
+              "already took). No evaluation starts after it; those running finish.")
 @click.option("--seed", type=int, default=default("seed"), show_default=True,
               help="Seed of the run.")
 @click.option("--out-dir", "out", type=click.Path(file_okay=False, path_type=Path),

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.evaluate import extract_solution
+from sga_agent.cli.options import Duration
 from sga_agent.config import SearchConfig
 from sga_agent.run_store import RunStore
 from sga_agent.task import Evaluation
@@ -252,3 +253,20 @@ def test_search_help_writes_every_default_one_way():
     iterations = f"{PRESETS['sga']['iterations']} (sga), {PRESETS['quick']['iterations']} (quick)"
     assert f"Outer iterations.  [default: ({iterations}); x>=1]" in help_text
     assert "--out-dir DIRECTORY" in help_text and "--out " not in help_text
+
+
+@pytest.mark.parametrize(
+    ("text", "seconds"), [("15m", 900.0), ("1h30m", 5400.0), ("90s", 90.0), ("2.5", 2.5)]
+)
+def test_a_time_budget_is_read_as_seconds(text, seconds):
+    assert Duration().convert(text, None, None) == seconds
+
+
+@pytest.mark.parametrize("text", ["soon", "15 minutes", "0", "m"])
+def test_a_bad_time_budget_is_a_usage_error_naming_the_form(tmp_path, text):
+    args = ["search", "--task", "elastic", "--time-budget", text, "--out-dir", str(tmp_path)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    assert "--time-budget" in result.output
+    assert "duration" in result.output
+    assert not any(tmp_path.iterdir())

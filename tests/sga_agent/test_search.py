@@ -143,6 +143,44 @@ def test_budget_stops_cleanly(tmp_path):
     assert json.loads((store.path / "summary.json").read_text())["stopped"] == result.stopped
 
 
+class SlowLossInCode(LossInCode):
+    """LossInCode whose every evaluation takes ``seconds`` of wall time (at submission)."""
+
+    def __init__(self, seconds: float) -> None:
+        super().__init__()
+        self.seconds = seconds
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        time.sleep(self.seconds)
+        return super().submit(task, solution, settings)
+
+
+def test_time_budget_starts_no_evaluation_after_it(tmp_path):
+    cfg = config(max_seconds=0.6)
+    store = RunStore.create(tmp_path, cfg, {})
+    evaluator = SlowLossInCode(0.4)
+    answers = [LAW.format(value=v) for v in range(10, 20)]
+    result = Search(cfg, FakeTask(), Scripted(answers), evaluator, store).run()
+    # the seed ends at 0.4 s; the first offspring starts before 0.6 s, the next one would not
+    assert result.stopped == "max_seconds=0.6 reached"
+    assert len(evaluator.calls) == 2
+    assert result.totals.seconds >= 0.6
+    assert json.loads((store.path / "summary.json").read_text())["stopped"] == result.stopped
+
+
+def test_a_resumed_run_counts_the_time_its_earlier_sessions_took(tmp_path):
+    store = RunStore.create(tmp_path, config(), {})
+    sessions = [(1000.0, "search_started"), (1100.0, "iteration_started"),
+                (2000.0, "search_started"), (2050.0, "iteration_started")]  # fmt: skip
+    with open(store.path / "events.jsonl", "a") as log:
+        for moment, kind in sessions:
+            log.write(json.dumps({"time": moment, "type": kind}) + "\n")
+    assert store.recorded().seconds == 150.0
+    cfg = config(max_seconds=120)
+    result = Search(cfg, FakeTask(), Scripted([]), LossInCode(), store).run()
+    assert result.stopped == "max_seconds=120 reached"  # only the seed was evaluated
+
+
 def test_resume_reuses_answers_and_evaluations(tmp_path):
     answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
     full, full_store, *_ = run(tmp_path / "full", answers)
