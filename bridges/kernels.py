@@ -17,19 +17,26 @@ writes every node of the boxes before reading any, and reads nothing outside the
 outside keep stale values that are never used. In the paper scene a box is about a fifth of
 the grid. Parallel loops visit every node.
 
-The reverse pass is one launch, :func:`step_backward`: it redoes the step's P2G and grid update
-(the reverse reads the grid), then runs the hand-written adjoints
+The reverse pass is one launch, ``backward``: it redoes the step's P2G and grid update (the
+reverse reads the grid), then runs the hand-written adjoints
 (:mod:`taichi_mpm.kernels.transfer_adjoint`) of G2P, of the grid update (walls included) and
 of P2G. The per-particle and per-node functions are those of
 :mod:`taichi_mpm.kernels.transfer`, which ``taichi_mpm.Simulator`` differentiates with Taichi's
-autodiff instead.
+autodiff instead. Both step kernels take the grids as :data:`~taichi_mpm.kernels.arguments.Grid`
+packs and the step's constants as one pack (``taichi_mpm.kernels.arguments.step_constants``),
+and are made once per precision (:func:`step_kernels`).
 """
 
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import taichi as ti
 
 from taichi_mpm.front_end import shorten_positions_under
+from taichi_mpm.kernels import arguments
+from taichi_mpm.kernels.arguments import CARRIED, Grid, GridGrad
 from taichi_mpm.kernels.constitutive import J_FLOOR, SIGMA_FLOOR
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
 from taichi_mpm.kernels.transfer import (
@@ -47,7 +54,10 @@ from taichi_mpm.kernels.transfer_adjoint import (
 
 shorten_positions_under(Path(__file__).parent)
 
-#: Column offsets of the packed per-particle rows.
+#: The fields of a packed input row, in order, and their shapes per particle: the state a step
+#: carries (``CARRIED``: x, v, C, F), then the Kirchhoff stress. An output row holds the
+#: carried state alone. The fields' first columns:
+INPUT_FIELDS = {**CARRIED, "stress": (3, 3)}
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24
 STATE_WIDTH, PACKED_WIDTH = 24, 33
 
@@ -78,9 +88,10 @@ def _put_mat(t: ti.template(), p, offset, value):
 
 
 @ti.func
-def _measure_boxes(packed: ti.template(), box: ti.template(), n, dx):
+def _measure_boxes(packed: ti.template(), box: ti.template(), constants: ti.template()):
     """Each copy's occupied box (serial loops only): from the lowest to past the highest node
     of its particles' 27-node stencils."""
+    n = constants.grid_resolution
     B = box.shape[0]
     N = packed.shape[0] // B
     ti.loop_config(serialize=True)
@@ -88,7 +99,7 @@ def _measure_boxes(packed: ti.template(), box: ti.template(), n, dx):
         lower = ti.Vector([n, n, n])
         upper = ti.Vector([0, 0, 0])
         for p in range(N):
-            base, _fx, _w = stencil(_vec(packed, b * N + p, COL_X), 1.0 / dx, n)
+            base, _fx, _w = stencil(_vec(packed, b * N + p, COL_X), 1.0 / constants.dx, n)
             lower = ti.min(lower, base)
             upper = ti.max(upper, base + 3)
         for d in ti.static(range(3)):
@@ -98,18 +109,18 @@ def _measure_boxes(packed: ti.template(), box: ti.template(), n, dx):
 
 @ti.func
 def _each_node(body: ti.template(), before: ti.template(), after: ti.template(),
-               box: ti.template(), B, nodes, n, serial: ti.template()):  # fmt: skip
-    """``body(*before, b, q, *after)`` for node q of every copy b: the nodes of the copies'
-    boxes with serial loops, every node with parallel ones."""
+               box: ti.template(), nodes, n, serial: ti.template()):  # fmt: skip
+    """``body(*before, b, q, *after)`` for node q of every copy b (a row of ``box``): the nodes
+    of the copies' boxes with serial loops, all ``nodes`` with parallel ones."""
     if ti.static(serial):
         ti.loop_config(serialize=True)
-        for b in range(B):
+        for b in range(box.shape[0]):
             for i in range(box[b, 0], box[b, 3]):
                 for j in range(box[b, 1], box[b, 4]):
                     for k in range(box[b, 2], box[b, 5]):
                         body(*before, b, node_index(i, j, k, n), *after)
     else:
-        for b, q in ti.ndrange(B, nodes):
+        for b, q in ti.ndrange(box.shape[0], nodes):
             body(*before, b, q, *after)
 
 
@@ -125,135 +136,108 @@ def _clear_velocity_grad(grid_velocity_grad: ti.template(), b, q):
 
 
 @ti.func
-def _scatter_and_update(
-    packed: ti.template(),
-    grid_mass: ti.template(),
-    grid_momentum: ti.template(),
-    grid_velocity: ti.template(),
-    box: ti.template(),
-    settings: ti.template(),
-    serial: ti.template(),
-):
+def _scatter_and_update(packed: ti.template(), grid: ti.template(), box: ti.template(),
+                        constants: ti.template(), serial: ti.template()):  # fmt: skip
     """Clear every copy's grid (its box), P2G of the packed input, the grid update."""
-    n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction = settings
-    B, nodes = grid_mass.shape[0], grid_mass.shape[1]
+    n = constants.grid_resolution
+    B, nodes = grid.mass.shape[0], grid.mass.shape[1]
     N = packed.shape[0] // B
     if ti.static(serial):
-        _measure_boxes(packed, box, n, dx)
-    _each_node(_clear_node, (grid_mass, grid_momentum), (), box, B, nodes, n, serial)
+        _measure_boxes(packed, box, constants)
+    _each_node(_clear_node, (grid.mass, grid.momentum), (), box, nodes, n, serial)
     ti.loop_config(serialize=serial)
     for b, p in ti.ndrange(B, N):
         row = b * N + p
         p2g_particle(_vec(packed, row, COL_X), _vec(packed, row, COL_V),
-                     _mat(packed, row, COL_C), _mat(packed, row, COL_STRESS), grid_mass,
-                     grid_momentum, b, n, dx, dt, volume, mass)  # fmt: skip
-    _each_node(update_node, (grid_mass, grid_momentum),
-               (n, grid_velocity, dt, ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
-               box, B, nodes, n, serial)  # fmt: skip
+                     _mat(packed, row, COL_C), _mat(packed, row, COL_STRESS), grid.mass,
+                     grid.momentum, b, constants)  # fmt: skip
+    _each_node(update_node, (grid.mass, grid.momentum, grid.velocity), (constants,), box, nodes,
+               n, serial)  # fmt: skip
 
 
-@ti.kernel
-def step_forward(
-    packed: ti.types.ndarray(),
-    out: ti.types.ndarray(),
-    grid_mass: ti.types.ndarray(),
-    grid_momentum: ti.types.ndarray(),
-    grid_velocity: ti.types.ndarray(),
-    box: ti.types.ndarray(),
-    n: ti.i32,
-    dx: float,
-    dt: float,
-    volume: float,
-    mass: float,
-    gx: float,
-    gy: float,
-    gz: float,
-    wall_kind: ti.i32,
-    thickness: ti.i32,
-    friction: float,
-    serial: ti.template(),
-):
-    """One step: packed (B * N, 33) input -> packed (B * N, 24) output (x, v, C, F_trial)."""
-    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity, box,
-                        (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
-                        serial)  # fmt: skip
-    B = grid_mass.shape[0]
-    N = packed.shape[0] // B
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(B, N):
-        row = b * N + p
-        new_x, new_v, new_C, new_F = g2p_particle(_vec(packed, row, COL_X),
-                                                  _mat(packed, row, COL_F), grid_velocity, b, n,
-                                                  dx, dt)  # fmt: skip
-        _put_vec(out, row, COL_X, new_x)
-        _put_vec(out, row, COL_V, new_v)
-        _put_mat(out, row, COL_C, new_C)
-        _put_mat(out, row, COL_F, new_F)
+@dataclass(frozen=True)
+class StepKernels:
+    """A bridge step's kernels for one precision.
+
+    ``forward(packed, out, grid, box, constants, serial)``: one step, packed (B * N, 33) input
+    -> packed (B * N, 24) output (x, v, C, F_trial).
+
+    ``backward(packed, output, output_grad, input_grad, grid, grid_grad, box, constants,
+    serial)``: a step's reverse, the packed (B * N, 33) ``input_grad`` (dL/d x, v, C, F,
+    stress) from the (B * N, 24) ``output_grad``, given the step's (B * N, 24) ``output``.
+    Redoes P2G and the grid update, then runs the adjoints of G2P, the grid update and P2G in
+    turn; ``grid_grad`` holds dL/d(grid mass, momentum, velocity).
+
+    ``grid`` and ``grid_grad`` are :data:`~taichi_mpm.kernels.arguments.Grid` and
+    :data:`~taichi_mpm.kernels.arguments.GridGrad` packs of (B, n^3) arrays, ``box`` the (B, 6)
+    occupied boxes, ``serial`` compile-time.
+    """
+
+    forward: Callable
+    backward: Callable
 
 
-@ti.kernel
-def step_backward(
-    packed: ti.types.ndarray(),
-    output: ti.types.ndarray(),
-    output_grad: ti.types.ndarray(),
-    input_grad: ti.types.ndarray(),
-    grid_mass: ti.types.ndarray(),
-    grid_momentum: ti.types.ndarray(),
-    grid_velocity: ti.types.ndarray(),
-    grid_mass_grad: ti.types.ndarray(),
-    grid_momentum_grad: ti.types.ndarray(),
-    grid_velocity_grad: ti.types.ndarray(),
-    box: ti.types.ndarray(),
-    n: ti.i32,
-    dx: float,
-    dt: float,
-    volume: float,
-    mass: float,
-    gx: float,
-    gy: float,
-    gz: float,
-    wall_kind: ti.i32,
-    thickness: ti.i32,
-    friction: float,
-    serial: ti.template(),
-):
-    """A step's reverse: the packed (B * N, 33) ``input_grad`` (dL/d x, v, C, F, stress) from
-    the (B * N, 24) ``output_grad``, given the step's (B * N, 24) ``output``. Redoes P2G and
-    the grid update, then runs the adjoints of G2P, the grid update and P2G in turn."""
-    _scatter_and_update(packed, grid_mass, grid_momentum, grid_velocity, box,
-                        (n, dx, dt, volume, mass, gx, gy, gz, wall_kind, thickness, friction),
-                        serial)  # fmt: skip
-    B, nodes = grid_mass.shape[0], grid_mass.shape[1]
-    N = packed.shape[0] // B
-    _each_node(_clear_velocity_grad, (grid_velocity_grad,), (), box, B, nodes, n, serial)
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(B, N):
-        row = b * N + p
-        x_grad, F_grad = g2p_particle_adjoint(
-            _vec(packed, row, COL_X), _mat(packed, row, COL_F), _vec(output, row, COL_V),
-            _mat(output, row, COL_C), grid_velocity, grid_velocity_grad, b, n, dx, dt,
-            _vec(output_grad, row, COL_X),
-            _vec(output_grad, row, COL_V), _mat(output_grad, row, COL_C),
-            _mat(output_grad, row, COL_F),
-        )  # fmt: skip
-        _put_vec(input_grad, row, COL_X, x_grad)
-        _put_mat(input_grad, row, COL_F, F_grad)
-    _each_node(update_node_adjoint,
-               (grid_mass, grid_momentum, grid_velocity_grad, grid_mass_grad, grid_momentum_grad),
-               (n, dt, ti.Vector([gx, gy, gz]), wall_kind, thickness, friction),
-               box, B, nodes, n, serial)  # fmt: skip
-    ti.loop_config(serialize=serial)
-    for b, p in ti.ndrange(B, N):
-        row = b * N + p
-        x_grad, v_grad, C_grad, stress_grad = p2g_particle_adjoint(
-            _vec(packed, row, COL_X), _vec(packed, row, COL_V), _mat(packed, row, COL_C),
-            _mat(packed, row, COL_STRESS), grid_mass_grad, grid_momentum_grad, b, n, dx, dt,
-            volume, mass,
-        )  # fmt: skip
-        _put_vec(input_grad, row, COL_X, _vec(input_grad, row, COL_X) + x_grad)
-        _put_vec(input_grad, row, COL_V, v_grad)
-        _put_mat(input_grad, row, COL_C, C_grad)
-        _put_mat(input_grad, row, COL_STRESS, stress_grad)
+@functools.cache
+def step_kernels(dtype) -> StepKernels:
+    """:class:`StepKernels` whose ``constants`` are in ``dtype``."""
+    Constants = arguments.model_types(dtype).constants
+
+    @ti.kernel
+    def step_forward(packed: ti.types.ndarray(), out: ti.types.ndarray(), grid: Grid,
+                     box: ti.types.ndarray(), constants: Constants,
+                     serial: ti.template()):  # fmt: skip
+        _scatter_and_update(packed, grid, box, constants, serial)
+        B = grid.mass.shape[0]
+        N = packed.shape[0] // B
+        ti.loop_config(serialize=serial)
+        for b, p in ti.ndrange(B, N):
+            row = b * N + p
+            new_x, new_v, new_C, new_F = g2p_particle(_vec(packed, row, COL_X),
+                                                      _mat(packed, row, COL_F), grid.velocity, b,
+                                                      constants)  # fmt: skip
+            _put_vec(out, row, COL_X, new_x)
+            _put_vec(out, row, COL_V, new_v)
+            _put_mat(out, row, COL_C, new_C)
+            _put_mat(out, row, COL_F, new_F)
+
+    @ti.kernel
+    def step_backward(packed: ti.types.ndarray(), output: ti.types.ndarray(),
+                      output_grad: ti.types.ndarray(), input_grad: ti.types.ndarray(),
+                      grid: Grid, grid_grad: GridGrad, box: ti.types.ndarray(),
+                      constants: Constants, serial: ti.template()):  # fmt: skip
+        _scatter_and_update(packed, grid, box, constants, serial)
+        B, nodes = grid.mass.shape[0], grid.mass.shape[1]
+        N = packed.shape[0] // B
+        n = constants.grid_resolution
+        _each_node(_clear_velocity_grad, (grid_grad.velocity_grad,), (), box, nodes, n, serial)
+        ti.loop_config(serialize=serial)
+        for b, p in ti.ndrange(B, N):
+            row = b * N + p
+            x_grad, F_grad = g2p_particle_adjoint(
+                _vec(packed, row, COL_X), _mat(packed, row, COL_F), _vec(output, row, COL_V),
+                _mat(output, row, COL_C), grid.velocity, grid_grad.velocity_grad, b, constants,
+                _vec(output_grad, row, COL_X), _vec(output_grad, row, COL_V),
+                _mat(output_grad, row, COL_C), _mat(output_grad, row, COL_F),
+            )  # fmt: skip
+            _put_vec(input_grad, row, COL_X, x_grad)
+            _put_mat(input_grad, row, COL_F, F_grad)
+        _each_node(update_node_adjoint,
+                   (grid.mass, grid.momentum, grid_grad.velocity_grad, grid_grad.mass_grad,
+                    grid_grad.momentum_grad), (constants,), box, nodes, n, serial)  # fmt: skip
+        ti.loop_config(serialize=serial)
+        for b, p in ti.ndrange(B, N):
+            row = b * N + p
+            x_grad, v_grad, C_grad, stress_grad = p2g_particle_adjoint(
+                _vec(packed, row, COL_X), _vec(packed, row, COL_V), _mat(packed, row, COL_C),
+                _mat(packed, row, COL_STRESS), grid_grad.mass_grad, grid_grad.momentum_grad, b,
+                constants,
+            )  # fmt: skip
+            _put_vec(input_grad, row, COL_X, _vec(input_grad, row, COL_X) + x_grad)
+            _put_vec(input_grad, row, COL_V, v_grad)
+            _put_mat(input_grad, row, COL_C, C_grad)
+            _put_mat(input_grad, row, COL_STRESS, stress_grad)
+
+    return StepKernels(step_forward, step_backward)
 
 
 @ti.kernel

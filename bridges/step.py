@@ -20,15 +20,17 @@ particle tensors torch saves (33 numbers per particle and step) plus the laws' o
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
+
 import taichi as ti
 import torch
 
 from bridges import kernels
 from taichi_mpm import runtime
-from taichi_mpm.kernels import transfer as tk
+from taichi_mpm.kernels.arguments import CARRIED, Grid, GridGrad, step_constants
 from taichi_mpm.scene import Scene
 
-_WALL_CODES = {"slip": tk.SLIP, "sticky": tk.STICKY, "separate": tk.SEPARATE}
 #: A step's particles from which its CPU loops run in parallel (when Taichi has more than one
 #: thread): P2G and the G2P adjoint scatter with atomic adds there. Measured on 2 threads
 #: (``benchmarks/bridge_step.py --threads 2 --loops serial parallel``): 10,000 particles took
@@ -65,23 +67,22 @@ class Transfer:
         self.batch = batch
         self.dtype = torch_dtype()
         self._parallel = parallel
-        n = scene.grid_resolution
+        self._kernels = kernels.step_kernels(info.dtype)
+        self._constants = step_constants(scene)
+        nodes = scene.grid_resolution**3
         vec = ti.types.vector(3, info.dtype)
 
-        def grid(element):  # copy b: row b, a flat row of n^3 nodes
-            return ti.ndarray(element, shape=(batch, n**3))
+        def grid():  # mass, momentum, velocity; copy b: row b, a flat row of n^3 nodes
+            return tuple(ti.ndarray(element, shape=(batch, nodes))
+                         for element in (info.dtype, vec, vec))  # fmt: skip
 
-        self.grid_mass, self.grid_momentum = grid(info.dtype), grid(vec)
-        self.grid_velocity = grid(vec)
+        mass, momentum, velocity = grid()
+        self.grid = Grid(mass=mass, momentum=momentum, velocity=velocity)
         # dL/d(grid mass, momentum, velocity) of the step being reversed
-        self._grid_grads = (grid(info.dtype), grid(vec), grid(vec))
+        mass, momentum, velocity = grid()
+        self._grid_grad = GridGrad(mass_grad=mass, momentum_grad=momentum, velocity_grad=velocity)
         # each copy's occupied box of grid nodes, measured by every launch (bridges.kernels)
         self._box = ti.ndarray(ti.i32, shape=(batch, 6))
-        walls = scene.walls
-        friction = walls.friction if walls.kind == "separate" else 0.0
-        self._settings = (n, scene.dx, scene.dt, scene.particle_volume, scene.particle_mass,
-                          *scene.gravity, _WALL_CODES[walls.kind], walls.thickness,
-                          friction)  # fmt: skip
 
     @property
     def num_particles(self) -> int:
@@ -95,14 +96,10 @@ class Transfer:
             return not self._parallel
         return not runtime.parallel_worthwhile(self.num_particles, PARALLEL_MIN_PARTICLES)
 
-    def _grids(self):
-        return self.grid_mass, self.grid_momentum, self.grid_velocity
-
     def forward(self, packed: torch.Tensor) -> torch.Tensor:
         """Packed (B * N, 24) next state (x, v, C, F_trial) from a packed (B * N, 33) input."""
         out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
-        kernels.step_forward(packed, out, *self._grids(), self._box, *self._settings,
-                             self._serial)  # fmt: skip
+        self._kernels.forward(packed, out, self.grid, self._box, self._constants, self._serial)
         return out
 
     def backward(self, packed: torch.Tensor, output: torch.Tensor,
@@ -110,9 +107,9 @@ class Transfer:
         """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 33) input, its
         (B * N, 24) output and dL/d(output)."""
         input_grad = packed.new_empty(packed.shape)
-        kernels.step_backward(packed, output, output_grad.contiguous(), input_grad,
-                              *self._grids(), *self._grid_grads, self._box, *self._settings,
-                              self._serial)  # fmt: skip
+        self._kernels.backward(packed, output, output_grad.contiguous(), input_grad, self.grid,
+                               self._grid_grad, self._box, self._constants,
+                               self._serial)  # fmt: skip
         return input_grad
 
 
@@ -127,12 +124,13 @@ def _flat(tensor: torch.Tensor, name: str, shape: tuple[int, ...], dtype) -> tor
     return tensor.detach().reshape(shape[0], -1)
 
 
-def _unpack(packed: torch.Tensor, columns: tuple[int, ...]) -> tuple[torch.Tensor, ...]:
-    """Views of packed rows: widths 3 -> (N, 3), 9 -> (N, 3, 3)."""
+def _unpack(packed: torch.Tensor, shapes: Iterable[tuple[int, ...]]) -> tuple[torch.Tensor, ...]:
+    """Views of packed rows, one (N, *shape) per field."""
     views, start = [], 0
-    for width in columns:
+    for shape in shapes:
+        width = math.prod(shape)
         part = packed[:, start : start + width]
-        views.append(part if width == 3 else part.unflatten(1, (3, 3)))
+        views.append(part if len(shape) == 1 else part.unflatten(1, shape))
         start += width
     return tuple(views)
 
@@ -147,13 +145,13 @@ class _MPMStep(torch.autograd.Function):
         # the packed output: the next step's inputs are views of it, so it costs no memory
         # (a plain tensor without a graph: holding it makes no reference cycle)
         ctx.output = transfer.forward(_packed(transfer, x, v, C, F, stress))
-        return _unpack(ctx.output, (3, 3, 9, 9))
+        return _unpack(ctx.output, CARRIED.values())
 
     @staticmethod
     def backward(ctx, *output_grads):
         packed = _packed(ctx.transfer, *ctx.saved_tensors)
         N = packed.shape[0]
-        widths = (3, 3, 9, 9)
+        widths = [math.prod(shape) for shape in CARRIED.values()]
         output_grad = torch.cat(
             [
                 packed.new_zeros(N, w) if g is None else g.reshape(N, w)
@@ -162,19 +160,17 @@ class _MPMStep(torch.autograd.Function):
             dim=1,
         )
         input_grad = ctx.transfer.backward(packed, ctx.output, output_grad)
-        return (*_unpack(input_grad, (3, 3, 9, 9, 9)), None)
+        return (*_unpack(input_grad, kernels.INPUT_FIELDS.values()), None)
 
 
-def _packed(transfer: Transfer, x, v, C, F, stress) -> torch.Tensor:
-    """One (N, 33) row per particle: x, v, C, F, stress (checked shapes and dtype)."""
+def _packed(transfer: Transfer, *tensors: torch.Tensor) -> torch.Tensor:
+    """One (N, 33) row per particle from x, v, C, F, stress (checked shapes and dtype)."""
     N, dtype = transfer.num_particles, transfer.dtype
+    fields = kernels.INPUT_FIELDS.items()
     return torch.cat(
         [
-            _flat(x, "x", (N, 3), dtype),
-            _flat(v, "v", (N, 3), dtype),
-            _flat(C, "C", (N, 3, 3), dtype),
-            _flat(F, "F", (N, 3, 3), dtype),
-            _flat(stress, "stress", (N, 3, 3), dtype),
+            _flat(tensor, name, (N, *shape), dtype)
+            for tensor, (name, shape) in zip(tensors, fields, strict=True)
         ],
         dim=1,
     )

@@ -10,6 +10,11 @@ Usage (a tape in three verbs)::
 Memory does not grow with steps x particles: the forward pass keeps only the state at
 the start of every segment of ``checkpoint_every`` steps; the backward pass re-runs one
 segment at a time, storing its steps, and walks it backwards with Taichi's autodiff.
+
+The kernels read a model and advance a state (:mod:`taichi_mpm.kernels.arguments`): the
+model is the scene's step constants and the material's pack, made when the simulator or its
+material is set; the state is the recorded segment's particle arrays, its grids and the SVD
+records of its constitutive updates.
 """
 
 from __future__ import annotations
@@ -21,7 +26,10 @@ import numpy as np
 import taichi as ti
 
 from taichi_mpm import runtime
-from taichi_mpm.kernels import constitutive, slots, step, transfer
+from taichi_mpm.kernels import arguments, constitutive, slots
+from taichi_mpm.kernels.arguments import CARRIED, Grid, Records, State
+from taichi_mpm.kernels.step import step_kernels
+from taichi_mpm.kernels.transfer import phase_kernels
 from taichi_mpm.materials import (
     PARAMETER_INDEX,
     DruckerPrager,
@@ -33,10 +41,7 @@ from taichi_mpm.materials import (
     VonMises,
     WeaklyCompressibleFluid,
 )
-from taichi_mpm.scene import WALL_KINDS, Scene
-
-_WALL_CODES = {"slip": transfer.SLIP, "sticky": transfer.STICKY, "separate": transfer.SEPARATE}
-assert set(_WALL_CODES) == set(WALL_KINDS)
+from taichi_mpm.scene import Scene
 
 #: Default memory for one recorded segment; sets ``checkpoint_every`` when not given.
 SEGMENT_BUDGET_BYTES = 32 * 2**20
@@ -82,13 +87,16 @@ class Simulator:
         info = runtime.current()
         self.scene = scene
         self._dtype = info.dtype
-        self._tol = info.spectral_tol
         if parallel is None:  # GPUs always run parallel loops
             parallel = info.arch != "cpu" or scene.num_particles >= PARALLEL_THRESHOLD
         self._serial = not parallel
         self.segment = self._segment_length(checkpoint_every)
         self.num_segments = -(-scene.steps // self.segment)
-        self._allocate()
+        self._allocate()  # the state: particle arrays, grids, SVD records
+        # the model: the scene's step constants here, the material's pack with the material
+        self._constants = arguments.step_constants(scene)
+        self._step_kernels = step_kernels(self._dtype)
+        self._phase_kernels = phase_kernels(self._dtype)
         self._frames: np.ndarray | None = None
         #: Full states kept by the last forward(state_frames=...): x, v, C, F (trial).
         self.states: dict[str, np.ndarray] = {}
@@ -110,7 +118,8 @@ class Simulator:
 
     def bytes_per_checkpoint(self) -> int:
         """Memory of one stored state (x, v, C, F)."""
-        return (8 if self._dtype == ti.f64 else 4) * 24 * self.scene.num_particles
+        values = sum(int(np.prod(shape)) for shape in CARRIED.values())
+        return (8 if self._dtype == ti.f64 else 4) * values * self.scene.num_particles
 
     def bytes_per_step(self) -> int:
         """Memory one recorded step takes (values, gradients and SVD factors)."""
@@ -121,45 +130,36 @@ class Simulator:
 
     def _allocate(self) -> None:
         n, N, k = self.scene.grid_resolution, self.scene.num_particles, self.segment
-        vec, mat, dt = (
-            ti.types.vector(3, self._dtype),
-            ti.types.matrix(3, 3, self._dtype),
-            self._dtype,
-        )
+        dt = self._dtype
+        vec, mat = ti.types.vector(3, dt), ti.types.matrix(3, 3, dt)
 
         def array(element, shape, grad=True):
             return ti.ndarray(element, shape=shape, needs_grad=grad)
 
-        self.x = array(vec, (k + 1, N))
-        self.v = array(vec, (k + 1, N))
-        self.C = array(mat, (k + 1, N))
-        self.F = array(mat, (k + 1, N))
-        self.F_corrected = array(mat, (k, N))
-        self.stress = array(mat, (k, N))
-        self.grid_mass = array(dt, (k, n**3))  # one flat row of nodes per step
-        self.grid_momentum = array(vec, (k, n**3))
-        self.grid_velocity = array(vec, (k, n**3))
+        def carried(shape, grad=True):  # an array of `shape` per field of CARRIED
+            return {name: array(vec if len(field) == 1 else mat, shape, grad)
+                    for name, field in CARRIED.items()}  # fmt: skip
+
+        #: the recorded segment: slot s holds step start + s
+        self.state = State(**carried((k + 1, N)), F_corrected=array(mat, (k, N)),
+                           stress=array(mat, (k, N)))  # fmt: skip
+        self.grid = Grid(mass=array(dt, (k, n**3)), momentum=array(vec, (k, n**3)),
+                         velocity=array(vec, (k, n**3)))  # fmt: skip
+        coeff = ti.types.matrix(3, 2, dt)
+        self.records = Records(  # constants to the reverse pass: no gradients
+            trial_U=array(mat, (k, N), False),
+            trial_V=array(mat, (k, N), False),
+            elastic_U=array(mat, (k, N), False),
+            elastic_V=array(mat, (k, N), False),
+            coeff_von_mises=array(coeff, (k, N), False),
+            coeff_sand=array(coeff, (k, N), False),
+            coeff_elastic=array(coeff, (k, N), False),
+        )
         self.params = array(dt, (len(PARAMETER_INDEX),))
-        self._state = (self.x, self.v, self.C, self.F)
-        self._checkpoints = (
-            array(vec, (self.num_segments, N), False),
-            array(vec, (self.num_segments, N), False),
-            array(mat, (self.num_segments, N), False),
-            array(mat, (self.num_segments, N), False),
-        )
-        self._carry = (
-            array(vec, (1, N), False),
-            array(vec, (1, N), False),
-            array(mat, (1, N), False),
-            array(mat, (1, N), False),
-        )
+        self._carried = {name: self.state[name] for name in CARRIED}
+        self._checkpoints = carried((self.num_segments, N), False)
+        self._carry = carried((1, N), False)  # across segment boundaries: a state, its grad
         self._seed = array(vec, (N,), False)
-        coeff = ti.types.matrix(3, 2, self._dtype)
-        self._trial_basis = (array(mat, (k, N), False), array(mat, (k, N), False))
-        self._elastic_basis = (array(mat, (k, N), False), array(mat, (k, N), False))
-        self._coefficients = {
-            name: array(coeff, (k, N), False) for name in ("von_mises", "sand", "elastic")
-        }
 
     @property
     def material(self) -> Material:
@@ -176,6 +176,9 @@ class Simulator:
         self._recorded_segment: int | None = None
         self._phases = self._constitutive_phases(material)
         self.params.from_numpy(material.parameter_array().astype(self._numpy_dtype))
+        self._material_pack = arguments.material(
+            self.params, material.elastic_kind, self._share_basis
+        )
 
     def _constitutive_phases(self, material: Material) -> list[tuple[object, Callable]]:
         """(kernel, args(slot)) of the plastic then the elastic law, differentiated in reverse.
@@ -185,8 +188,8 @@ class Simulator:
         """
         C = constitutive
         serial = self._serial
-        F, Fc, params, stress = self.F, self.F_corrected, self.params, self.stress
-        coeff = self._coefficients
+        F, Fc, stress = self.state.F, self.state.F_corrected, self.state.stress
+        params, records = self.params, self.records
         plastic = material.plastic
         components = (
             plastic.components if isinstance(plastic, PlasticMixture) else ((1.0, plastic),)
@@ -194,14 +197,15 @@ class Simulator:
         spectral_elastic = isinstance(material.elastic, FixedCorotated | StVKHencky)
         single = len(components) == 1 and not isinstance(components[0][1], WeaklyCompressibleFluid)
         self._share_basis = spectral_elastic and single
-        trial = self._trial_basis
+        trial_U, trial_V = records.trial_U, records.trial_V
         phases: list[tuple[object, Callable]] = []
         for _, law in components:
             if isinstance(law, VonMises | DruckerPrager):
-                name = "von_mises" if isinstance(law, VonMises) else "sand"
-                kernel = C.plastic_von_mises if name == "von_mises" else C.plastic_sand
+                von_mises = isinstance(law, VonMises)
+                kernel = C.plastic_von_mises if von_mises else C.plastic_sand
+                coeff = records.coeff_von_mises if von_mises else records.coeff_sand
                 phases.append(
-                    (kernel, lambda s, k=name: (F, s, *trial, coeff[k], params, Fc, serial))
+                    (kernel, lambda s, c=coeff: (F, s, trial_U, trial_V, c, params, Fc, serial))
                 )
             else:
                 kernel = (
@@ -216,10 +220,11 @@ class Simulator:
                 if isinstance(material.elastic, FixedCorotated)
                 else C.stress_stvk_hencky
             )
-            basis = trial if self._share_basis else self._elastic_basis
-            phases.append(
-                (kernel, lambda s: (Fc, s, *basis, coeff["elastic"], params, stress, serial))
+            U, V = (
+                (trial_U, trial_V) if self._share_basis else (records.elastic_U, records.elastic_V)
             )
+            coeff = records.coeff_elastic
+            phases.append((kernel, lambda s: (Fc, s, U, V, coeff, params, stress, serial)))
         else:
             kernel = (
                 C.stress_linear
@@ -237,106 +242,24 @@ class Simulator:
 
     def _advance(self, steps: int) -> None:
         """Run slots 0 .. steps - 1 forward, recording every value the reverse pass reads."""
-        sc, walls = self.scene, self.scene.walls
-        arrays = (
-            self.x,
-            self.v,
-            self.C,
-            self.F,
-            self.F_corrected,
-            self.stress,
-            self.grid_mass,
-            self.grid_momentum,
-            self.grid_velocity,
-            self.params,
-            *self._trial_basis,
-            self._coefficients["von_mises"],
-            self._coefficients["sand"],
-            *self._elastic_basis,
-            self._coefficients["elastic"],
-        )
-        settings = (
-            sc.grid_resolution,
-            self._material.elastic_kind,
-            int(self._share_basis),
-            self._tol,
-            sc.dx,
-            sc.dt,
-            sc.particle_volume,
-            sc.particle_mass,
-            *sc.gravity,
-            _WALL_CODES[walls.kind],
-            walls.thickness,
-            self._wall_friction,
-        )
+        groups = (self.state, self.grid, self.records, self._material_pack, self._constants)
         if self._serial:
-            step.advance(*arrays, 0, steps, *settings)
+            self._step_kernels.advance(*groups, 0, steps)
         else:
             for s in range(steps):
-                step.step_parallel(*arrays, s, *settings)
+                self._step_kernels.step_parallel(*groups, s)
 
     def _substep_grad(self, s: int) -> None:
         """Reverse of step s: the phases' gradient kernels in reverse order."""
-        transfer.g2p.grad(*self._g2p_args(s))
-        transfer.grid_update.grad(*self._grid_args(s))
-        transfer.p2g.grad(*self._p2g_args(s))
+        state, grid, constants, serial = self.state, self.grid, self._constants, self._serial
+        phases = self._phase_kernels
+        phases.g2p.grad(state.x, state.v, state.C, state.F, state.F_corrected, grid.velocity, s,
+                        constants, serial)  # fmt: skip
+        phases.grid_update.grad(grid.mass, grid.momentum, grid.velocity, s, constants, serial)
+        phases.p2g.grad(state.x, state.v, state.C, state.stress, grid.mass, grid.momentum, s,
+                        constants, serial)  # fmt: skip
         for kernel, args in reversed(self._phases):
             kernel.grad(*args(s))
-
-    @property
-    def _wall_friction(self) -> float:
-        walls = self.scene.walls
-        return walls.friction if walls.kind == "separate" else 0.0
-
-    def _p2g_args(self, s: int):
-        sc = self.scene
-        return (
-            self.x,
-            self.v,
-            self.C,
-            self.stress,
-            s,
-            self.grid_mass,
-            self.grid_momentum,
-            sc.grid_resolution,
-            sc.dx,
-            sc.dt,
-            sc.particle_volume,
-            sc.particle_mass,
-            self._serial,
-        )
-
-    def _grid_args(self, s: int):
-        sc, walls = self.scene, self.scene.walls
-        return (
-            self.grid_mass,
-            self.grid_momentum,
-            s,
-            sc.grid_resolution,
-            self.grid_velocity,
-            sc.dt,
-            *sc.gravity,
-            _WALL_CODES[walls.kind],
-            walls.thickness,
-            self._wall_friction,
-            self._serial,
-        )
-
-    def _g2p_args(self, s: int):
-        sc = self.scene
-        return (
-            self.x,
-            self.v,
-            self.C,
-            self.F,
-            self.F_corrected,
-            self.grid_velocity,
-            s,
-            sc.grid_resolution,
-            sc.dx,
-            sc.dt,
-            self._serial,
-        )
 
     # ------------------------------------------------------------------ segments
 
@@ -345,24 +268,26 @@ class Simulator:
 
     def _load_initial_state(self) -> None:
         sc, N, np_dtype = self.scene, self.scene.num_particles, self._numpy_dtype
-        eye = np.broadcast_to(np.eye(3), (N, 3, 3))
-        for array, value in zip(
-            self._carry, (sc.positions, sc.velocities, np.zeros((N, 3, 3)), eye), strict=True
-        ):
-            array.from_numpy(np.ascontiguousarray(value, dtype=np_dtype)[None])
-        for array, carry in zip(self._state, self._carry, strict=True):
-            slots.copy_slot(carry, 0, array, 0)
+        initial = {
+            "x": sc.positions,
+            "v": sc.velocities,
+            "C": np.zeros((N, 3, 3)),
+            "F": np.broadcast_to(np.eye(3), (N, 3, 3)),
+        }
+        for name, carry in self._carry.items():
+            carry.from_numpy(np.ascontiguousarray(initial[name], dtype=np_dtype)[None])
+            slots.copy_slot(carry, 0, self._carried[name], 0)
 
     def _store_checkpoint(self, segment: int) -> None:
-        for array, store in zip(self._state, self._checkpoints, strict=True):
-            slots.copy_slot(array, 0, store, segment)
+        for name, array in self._carried.items():
+            slots.copy_slot(array, 0, self._checkpoints[name], segment)
 
     def _restore_checkpoint(self, segment: int) -> None:
-        for array, store in zip(self._state, self._checkpoints, strict=True):
-            slots.copy_slot(store, segment, array, 0)
+        for name, array in self._carried.items():
+            slots.copy_slot(self._checkpoints[name], segment, array, 0)
 
     def _shift_last_to_first(self, steps: int) -> None:
-        for array in self._state:
+        for array in self._carried.values():
             slots.copy_slot(array, steps, array, 0)
 
     # ------------------------------------------------------------------ public API
@@ -390,10 +315,7 @@ class Simulator:
         N = self.scene.num_particles
         positions = np.empty((len(frames), N, 3))
         self.states = {
-            "x": np.empty((len(wanted_states), N, 3)),
-            "v": np.empty((len(wanted_states), N, 3)),
-            "C": np.empty((len(wanted_states), N, 3, 3)),
-            "F": np.empty((len(wanted_states), N, 3, 3)),
+            name: np.empty((len(wanted_states), N, *shape)) for name, shape in CARRIED.items()
         }
         for segment in range(self.num_segments):
             start, steps = segment * self.segment, self._segment_steps(segment)
@@ -403,11 +325,11 @@ class Simulator:
             self._advance(steps)
             wanted = np.nonzero((frames >= start) & (frames <= start + steps))[0]
             if len(wanted):
-                recorded = self.x.to_numpy()
+                recorded = self.state.x.to_numpy()
                 positions[wanted] = recorded[frames[wanted] - start]
             kept = np.nonzero((wanted_states >= start) & (wanted_states <= start + steps))[0]
             if len(kept):
-                for name, array in zip(self.states, self._state, strict=True):
+                for name, array in self._carried.items():
                     self.states[name][kept] = array.to_numpy()[wanted_states[kept] - start]
         # The last segment stays recorded: backward starts there without re-running it.
         self._recorded_segment = self.num_segments - 1
@@ -419,10 +341,7 @@ class Simulator:
         if self._frames is None:
             raise RuntimeError("call forward() before final_state()")
         last = self._segment_steps(self.num_segments - 1)
-        return {
-            name: array.to_numpy()[last]
-            for name, array in zip(("x", "v", "C", "F"), self._state, strict=True)
-        }
+        return {name: array.to_numpy()[last] for name, array in self._carried.items()}
 
     def backward(self, position_grads: np.ndarray) -> Gradients:
         """Reverse pass for a loss on the positions returned by the last :meth:`forward`.
@@ -451,27 +370,20 @@ class Simulator:
                 self._recorded_segment = segment
             self._zero_grads()
             if segment < self.num_segments - 1:
-                for array, carry in zip(self._state, self._carry, strict=True):
-                    slots.copy_slot(carry, 0, array.grad, steps)
+                for name, array in self._carried.items():
+                    slots.copy_slot(self._carry[name], 0, array.grad, steps)
             low = start if segment == 0 else start + 1
             for index in np.nonzero((frames >= low) & (frames <= start + steps))[0]:
                 self._seed.from_numpy(position_grads[index].astype(self._numpy_dtype))
-                slots.add_to_slot(self.x.grad, int(frames[index] - start), self._seed)
+                slots.add_to_slot(self.state.x.grad, int(frames[index] - start), self._seed)
             for s in reversed(range(steps)):
                 self._substep_grad(s)
-            for array, carry in zip(self._state, self._carry, strict=True):
-                slots.copy_slot(array.grad, 0, carry, 0)
+            for name, array in self._carried.items():
+                slots.copy_slot(array.grad, 0, self._carry[name], 0)
         return self._collect_gradients()
 
     def _zero_grads(self) -> None:
-        for array in (
-            *self._state,
-            self.F_corrected,
-            self.stress,
-            self.grid_mass,
-            self.grid_momentum,
-            self.grid_velocity,
-        ):
+        for _, array in (*self.state.items, *self.grid.items):
             slots.clear(array.grad)
 
     def _collect_gradients(self) -> Gradients:
@@ -479,8 +391,8 @@ class Simulator:
         names = self._material.parameters()
         return Gradients(
             material={name: float(param_grad[PARAMETER_INDEX[name]]) for name in names},
-            positions=self._carry[0].to_numpy()[0].astype(np.float64),
-            velocities=self._carry[1].to_numpy()[0].astype(np.float64),
+            positions=self._carry["x"].to_numpy()[0].astype(np.float64),
+            velocities=self._carry["v"].to_numpy()[0].astype(np.float64),
         )
 
     def _check_frames(self, frames: Iterable[int] | None, may_be_empty: bool = False) -> np.ndarray:

@@ -133,23 +133,23 @@ def sysid(
     family: str,
     names: tuple[str, ...],
     guess: dict[str, float],
-    optimizer: str,
     restarts: int,
-    iterations: int,
-    learning_rate: float,
-    fit_velocity: bool,
     seed: int,
     out_dir: Path,
     arch: str,
     precision: str,
+    **fit,
 ) -> None:
+    """``fit``: the options that set the :class:`~taichi_mpm.sysid.FitSettings` (--optimizer,
+    --iterations, --lr, --fit-velocity)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Column
 
-    from taichi_mpm.sysid import FitError, ObservationError, identify, load_observation
+    from taichi_mpm.sysid import FitError, FitSettings, ObservationError, identify, load_observation
     from taichi_mpm.sysid.parameters import TRANSFORMS
     from taichi_mpm.sysid.plot import plot_comparison
 
+    settings = FitSettings(**fit)
     console = Console(highlight=False)
     family = family.lower()
     parameters = family_parameters(family)
@@ -204,15 +204,16 @@ def sysid(
 
     backend = start_taichi(console, arch, precision)
     velocity = None
-    if fit_velocity:
+    if settings.fit_velocity:
         velocity = tm.rigid_velocity_fit(observation.scene.positions, observation.scene.velocities)
     console.print(
         f"Fitting [bold]{', '.join(names)}[/] of {family} to {observation.positions.shape[1]} "
         f"particles x {len(observation.frame_steps)} frames ({observation.scene.steps} steps, "
-        f"{backend}, {precision}, {optimizer}, {restarts} run{'s' * (restarts > 1)})",
+        f"{backend}, {precision}, {settings.optimizer}, {restarts} run{'s' * (restarts > 1)})",
         soft_wrap=True,
     )
 
+    iterations = settings.iterations
     total = restarts * iterations
     start = time.perf_counter()
     with Progress(
@@ -243,11 +244,8 @@ def sysid(
                 observation,
                 material,
                 names=names,
-                optimizer=optimizer,
                 restarts=restarts,
-                iterations=iterations,
-                learning_rate=learning_rate,
-                fit_velocity=fit_velocity,
+                settings=settings,
                 initial_velocity=velocity,
                 seed=seed,
                 callback=report,
@@ -272,9 +270,9 @@ def sysid(
         "material": family,
         "fitted": names,
         "guess": values,
-        "optimizer": optimizer,
+        "optimizer": settings.optimizer,
         "restarts": restarts,
-        "learning_rate": learning_rate,
+        "learning_rate": settings.learning_rate,
         "precision": precision,
         "values": best.values,
         "parameters": result.material.parameters(),

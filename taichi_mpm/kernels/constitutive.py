@@ -263,34 +263,23 @@ LINEAR, COROTATED, NEO_HOOKEAN, STVK_HENCKY = 0, 1, 2, 3
 
 
 @ti.func
-def constitutive_update(
-    F: ti.template(),
-    F_corrected: ti.template(),
-    stress: ti.template(),
-    slot,
-    p,
-    params: ti.template(),
-    trial_U: ti.template(),
-    trial_V: ti.template(),
-    coeff_von_mises: ti.template(),
-    coeff_sand: ti.template(),
-    elastic_U: ti.template(),
-    elastic_V: ti.template(),
-    coeff_elastic: ti.template(),
-    elastic_kind,
-    share_basis,
-    tol,
-):
+def constitutive_update(F: ti.template(), F_corrected: ti.template(), stress: ti.template(),
+                        records: ti.template(), material: ti.template(), slot, p):  # fmt: skip
     """Plastic mixture then elastic law for particle p, recording what the backward needs.
 
-    Writes F_corrected and stress, and the SVD factors and gradient coefficients that the
-    per-law kernels above read in reverse mode. With ``share_basis`` (a single SVD-based
-    plastic law, or none, before an SVD-based elastic law) F_corrected = U diag(S') V^T
-    and the elastic law reuses the trial SVD.
+    Writes F_corrected and stress, and into ``records`` (an
+    :data:`~taichi_mpm.kernels.arguments.Records`) the SVD factors and gradient coefficients
+    that the per-law kernels above read in reverse mode. ``material`` is the material's pack
+    (:func:`~taichi_mpm.kernels.arguments.material`). With ``material.share_basis`` (a single
+    SVD-based plastic law, or none, before an SVD-based elastic law) F_corrected =
+    U diag(S') V^T and the elastic law reuses the trial SVD.
     """
-    prm = material_constants(params)
+    elastic_kind = material.elastic_kind
+    share_basis = material.share_basis
+    tol = material.spectral_tol
+    prm = material_constants(material.params)
     Ft = F[slot, p]
-    w_von_mises, w_sand = params[W_VON_MISES], params[W_SAND]
+    w_von_mises, w_sand = material.params[W_VON_MISES], material.params[W_SAND]
     spectral_elastic = (elastic_kind == COROTATED) | (elastic_kind == STVK_HENCKY)
     elastic_law = LAW_HENCKY
     if elastic_kind == COROTATED:
@@ -298,44 +287,45 @@ def constitutive_update(
     Fc = ti.Matrix.zero(float, 3, 3)
     if w_von_mises != 0 or w_sand != 0 or share_basis != 0:
         u, s, v = singular_values(Ft)
-        trial_U[slot, p] = u
-        trial_V[slot, p] = v
+        records.trial_U[slot, p] = u
+        records.trial_V[slot, p] = v
         s_next = s
         if w_von_mises != 0:
             c = law_coefficients(LAW_VON_MISES, s, prm, tol)
-            coeff_von_mises[slot, p] = c
+            records.coeff_von_mises[slot, p] = c
             Fc += w_von_mises * isotropic_uv(Ft, u, v, c, von_mises_sigma, prm)
             s_next = von_mises_sigma(s, prm)
         if w_sand != 0:
             c = law_coefficients(LAW_SAND, s, prm, tol)
-            coeff_sand[slot, p] = c
+            records.coeff_sand[slot, p] = c
             Fc += w_sand * isotropic_uv(Ft, u, v, c, drucker_prager_sigma, prm)
             s_next = drucker_prager_sigma(s, prm)
         if share_basis != 0:
-            coeff_elastic[slot, p] = law_coefficients(elastic_law, s_next, prm, tol)
-    if params[W_IDENTITY] != 0:
-        Fc += params[W_IDENTITY] * Ft
-    if params[W_FLUID] != 0:
-        Fc += params[W_FLUID] * fluid_deformation(Ft)
+            records.coeff_elastic[slot, p] = law_coefficients(elastic_law, s_next, prm, tol)
+    if material.params[W_IDENTITY] != 0:
+        Fc += material.params[W_IDENTITY] * Ft
+    if material.params[W_FLUID] != 0:
+        Fc += material.params[W_FLUID] * fluid_deformation(Ft)
     F_corrected[slot, p] = Fc
     if spectral_elastic and share_basis == 0:
         u, s, v = singular_values(Fc)
-        elastic_U[slot, p] = u
-        elastic_V[slot, p] = v
-        coeff_elastic[slot, p] = law_coefficients(elastic_law, s, prm, tol)
+        records.elastic_U[slot, p] = u
+        records.elastic_V[slot, p] = v
+        records.coeff_elastic[slot, p] = law_coefficients(elastic_law, s, prm, tol)
     tau = ti.Matrix.zero(float, 3, 3)
     if elastic_kind == LINEAR:
         tau = linear_stress(Fc, prm)
     elif elastic_kind == NEO_HOOKEAN:
         tau = neo_hookean_stress(Fc, prm)
     else:
-        U = elastic_U[slot, p]
-        V = elastic_V[slot, p]
+        U = records.elastic_U[slot, p]
+        V = records.elastic_V[slot, p]
         if share_basis != 0:
-            U = trial_U[slot, p]
-            V = trial_V[slot, p]
+            U = records.trial_U[slot, p]
+            V = records.trial_V[slot, p]
+        coeff = records.coeff_elastic[slot, p]
         if elastic_kind == COROTATED:
-            tau = corotated_stress(Fc, U, V, coeff_elastic[slot, p], prm)
+            tau = corotated_stress(Fc, U, V, coeff, prm)
         else:
-            tau = stvk_hencky_stress(Fc, U, V, coeff_elastic[slot, p], prm)
+            tau = stvk_hencky_stress(Fc, U, V, coeff, prm)
     stress[slot, p] = tau

@@ -29,11 +29,11 @@ pass) and against finite differences in ``tests/bridges``.
 
 import taichi as ti
 
+from taichi_mpm.kernels.arguments import STICKY
 from taichi_mpm.kernels.linalg import identity, matmul_t, matvec, outer, t_matmul, t_matvec
 from taichi_mpm.kernels.transfer import (
     MASS_FLOOR,
     STENCIL,
-    STICKY,
     TANGENT_TINY,
     apply_wall,
     node_index,
@@ -59,12 +59,13 @@ def _weight_gradient(w, dw, i: ti.template(), j: ti.template(), k: ti.template()
 @ti.func
 def g2p_particle_adjoint(
     xp, Fc_p, new_v, new_C, grid_velocity: ti.template(), grid_velocity_grad: ti.template(),
-    grid_slot, n, dx, dt, x_out_grad, v_out_grad, C_out_grad, F_out_grad,
+    grid_slot, constants: ti.template(), x_out_grad, v_out_grad, C_out_grad, F_out_grad,
 ):  # fmt: skip
     """Reverse of :func:`~taichi_mpm.kernels.transfer.g2p_particle` (whose results ``new_v``
     and ``new_C`` it takes): adds dL/d(grid velocity) into ``grid_velocity_grad`` and returns
     (dL/dx, dL/dFc) of the particle."""
-    inv_dx = 1.0 / dx
+    n, dt = constants.grid_resolution, constants.dt
+    inv_dx = 1.0 / constants.dx
     base, fx, w = stencil(xp, inv_dx, n)
     dw = _weight_slopes(fx)
     origin = node_index(base[0], base[1], base[2], n)
@@ -83,16 +84,16 @@ def g2p_particle_adjoint(
 
 
 @ti.func
-def p2g_particle_adjoint(
-    xp, vp, Cp, stress_p, grid_mass_grad: ti.template(), grid_momentum_grad: ti.template(),
-    grid_slot, n, dx, dt, particle_volume, particle_mass,
-):  # fmt: skip
+def p2g_particle_adjoint(xp, vp, Cp, stress_p, grid_mass_grad: ti.template(),
+                         grid_momentum_grad: ti.template(), grid_slot,
+                         constants: ti.template()):  # fmt: skip
     """Reverse of :func:`~taichi_mpm.kernels.transfer.p2g_particle`: from dL/d(grid mass) and
     dL/d(grid momentum), the particle's (dL/dx, dL/dv, dL/dC, dL/d stress)."""
+    n, dx, particle_mass = constants.grid_resolution, constants.dx, constants.particle_mass
     inv_dx = 1.0 / dx
     base, fx, w = stencil(xp, inv_dx, n)
     dw = _weight_slopes(fx)
-    stress_scale = -dt * particle_volume * 4.0 * inv_dx * inv_dx
+    stress_scale = -constants.dt * constants.particle_volume * 4.0 * inv_dx * inv_dx
     affine = stress_scale * stress_p + particle_mass * Cp
     momentum = particle_mass * vp
     origin = node_index(base[0], base[1], base[2], n)
@@ -115,12 +116,13 @@ def p2g_particle_adjoint(
 
 
 @ti.func
-def _wall_adjoint(u, u_grad, d: ti.template(), node, n, kind, thickness, friction):
+def _wall_adjoint(u, u_grad, d: ti.template(), node, constants: ti.template()):
     """dL/du of one axis' wall step u -> u' (see the module docstring) from dL/du'."""
-    low = node[d] < thickness
-    high = node[d] >= n - thickness
+    friction = constants.wall_friction
+    low = node[d] < constants.wall_thickness
+    high = node[d] >= constants.grid_resolution - constants.wall_thickness
     grad = u_grad
-    if kind == STICKY:
+    if constants.wall_kind == STICKY:
         if low or high:
             grad = ti.Vector.zero(float, 3)
     elif (low and u[d] < 0) or (high and u[d] > 0):
@@ -141,8 +143,8 @@ def _wall_adjoint(u, u_grad, d: ti.template(), node, n, kind, thickness, frictio
 @ti.func
 def update_node_adjoint(
     grid_mass: ti.template(), grid_momentum: ti.template(), grid_velocity_grad: ti.template(),
-    grid_mass_grad: ti.template(), grid_momentum_grad: ti.template(), grid_slot, q, n, dt,
-    gravity, wall_kind, wall_thickness, wall_friction,
+    grid_mass_grad: ti.template(), grid_momentum_grad: ti.template(), grid_slot, q,
+    constants: ti.template(),
 ):  # fmt: skip
     """Reverse of :func:`~taichi_mpm.kernels.transfer.update_node`: writes node q's dL/d(mass)
     and dL/d(momentum) from its dL/d(velocity)."""
@@ -152,14 +154,15 @@ def update_node_adjoint(
     if mass > 0:
         momentum = grid_momentum[grid_slot, q]
         floored = ti.max(mass, MASS_FLOOR)
-        node = node_of(q, n)
-        u0 = momentum / floored + dt * gravity  # the velocity before each axis' walls
-        u1 = apply_wall(u0, 0, node, n, wall_kind, wall_thickness, wall_friction)
-        u2 = apply_wall(u1, 1, node, n, wall_kind, wall_thickness, wall_friction)
+        node = node_of(q, constants.grid_resolution)
+        # the velocity before each axis' walls
+        u0 = momentum / floored + constants.dt * constants.gravity
+        u1 = apply_wall(u0, 0, node, constants)
+        u2 = apply_wall(u1, 1, node, constants)
         grad = grid_velocity_grad[grid_slot, q]
-        grad = _wall_adjoint(u2, grad, 2, node, n, wall_kind, wall_thickness, wall_friction)
-        grad = _wall_adjoint(u1, grad, 1, node, n, wall_kind, wall_thickness, wall_friction)
-        grad = _wall_adjoint(u0, grad, 0, node, n, wall_kind, wall_thickness, wall_friction)
+        grad = _wall_adjoint(u2, grad, 2, node, constants)
+        grad = _wall_adjoint(u1, grad, 1, node, constants)
+        grad = _wall_adjoint(u0, grad, 0, node, constants)
         momentum_grad = grad / floored
         if mass > MASS_FLOOR:
             mass_grad = -grad.dot(momentum) / (mass * mass)

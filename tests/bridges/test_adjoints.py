@@ -13,8 +13,10 @@ import taichi as ti
 import torch
 
 import taichi_mpm as tm
+from bridges import kernels
 from bridges.step import Transfer, mpm_step
-from taichi_mpm.kernels import transfer as tk
+from taichi_mpm.kernels.arguments import CARRIED, step_constants
+from taichi_mpm.kernels.transfer import phase_kernels
 from tests.taichi_mpm.helpers import impact_scene
 
 WALLS = {
@@ -22,7 +24,6 @@ WALLS = {
     "sticky": tm.Walls("sticky", thickness=3),
     "separate": tm.Walls("separate", thickness=3, friction=0.4),
 }
-_WALL_CODES = {"slip": tk.SLIP, "sticky": tk.STICKY, "separate": tk.SEPARATE}
 
 
 def _random_step(scene: tm.Scene, seed: int):
@@ -70,13 +71,11 @@ def _autodiff_gradients(scene, inputs, weights):
     C.from_numpy(values[2])
     F_corrected.from_numpy(inputs[3].numpy()[None])
     stress.from_numpy(inputs[4].numpy()[None])
-    walls = scene.walls
-    friction = walls.friction if walls.kind == "separate" else 0.0
-    p2g_args = (x, v, C, stress, 0, grid_mass, grid_momentum, n, scene.dx, scene.dt,
-                scene.particle_volume, scene.particle_mass, True)  # fmt: skip
-    grid_args = (grid_mass, grid_momentum, 0, n, grid_velocity, scene.dt, *scene.gravity,
-                 _WALL_CODES[walls.kind], walls.thickness, friction, True)  # fmt: skip
-    g2p_args = (x, v, C, F, F_corrected, grid_velocity, 0, n, scene.dx, scene.dt, True)
+    constants = step_constants(scene)
+    tk = phase_kernels(ti.f64)
+    p2g_args = (x, v, C, stress, grid_mass, grid_momentum, 0, constants, True)
+    grid_args = (grid_mass, grid_momentum, grid_velocity, 0, constants, True)
+    g2p_args = (x, v, C, F, F_corrected, grid_velocity, 0, constants, True)
     tk.p2g(*p2g_args)
     tk.grid_update(*grid_args)
     tk.g2p(*g2p_args)
@@ -126,3 +125,13 @@ def test_serial_loops_over_occupied_boxes_equal_parallel_loops_over_the_grid():
     _step_and_gradients(boxed, elsewhere, weights)  # fills other nodes of the grid first
     for got, expected in zip(_step_and_gradients(boxed, inputs, weights), full_grid, strict=True):
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+
+
+def test_packed_rows_follow_the_carried_state():
+    """The kernels' column offsets are those of the fields the step packs, in their order."""
+    starts = np.cumsum([0] + [np.prod(shape) for shape in kernels.INPUT_FIELDS.values()])
+    assert list(kernels.INPUT_FIELDS)[: len(CARRIED)] == list(CARRIED)
+    columns = [kernels.COL_X, kernels.COL_V, kernels.COL_C, kernels.COL_F, kernels.COL_STRESS]
+    widths = (kernels.STATE_WIDTH, kernels.PACKED_WIDTH)
+    assert columns == list(starts[:-1])
+    assert widths == (starts[len(CARRIED)], starts[-1])

@@ -7,7 +7,8 @@ import torch
 
 import taichi_mpm as tm
 from bridges import laws
-from taichi_mpm import runtime
+from taichi_mpm.kernels import arguments
+from taichi_mpm.kernels.arguments import Records, model_types
 from taichi_mpm.kernels.constitutive import constitutive_update
 
 E, NU = 1000.0, 0.3  # mu = 385: von Mises yields beyond a deviatoric Hencky strain of 0.065
@@ -54,41 +55,11 @@ MATERIALS = {
 
 
 @ti.kernel
-def _constitutive(
-    F: ti.types.ndarray(),
-    F_corrected: ti.types.ndarray(),
-    stress: ti.types.ndarray(),
-    params: ti.types.ndarray(),
-    trial_U: ti.types.ndarray(),
-    trial_V: ti.types.ndarray(),
-    coeff_von_mises: ti.types.ndarray(),
-    coeff_sand: ti.types.ndarray(),
-    elastic_U: ti.types.ndarray(),
-    elastic_V: ti.types.ndarray(),
-    coeff_elastic: ti.types.ndarray(),
-    elastic_kind: ti.i32,
-    share_basis: ti.i32,
-    tol: float,
-):
+def _constitutive(F: ti.types.ndarray(), F_corrected: ti.types.ndarray(),
+                  stress: ti.types.ndarray(), records: Records,
+                  material: model_types(ti.f64).material):  # fmt: skip
     for p in range(F.shape[1]):
-        constitutive_update(
-            F,
-            F_corrected,
-            stress,
-            0,
-            p,
-            params,
-            trial_U,
-            trial_V,
-            coeff_von_mises,
-            coeff_sand,
-            elastic_U,
-            elastic_V,
-            coeff_elastic,
-            elastic_kind,
-            share_basis,
-            tol,
-        )
+        constitutive_update(F, F_corrected, stress, records, material, 0, p)
 
 
 def taichi_laws(material: tm.Material, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -99,20 +70,14 @@ def taichi_laws(material: tm.Material, F: np.ndarray) -> tuple[np.ndarray, np.nd
     F_trial.from_numpy(F[None])
     params = ti.ndarray(ti.f64, (len(tm.PARAMETER_NAMES),))
     params.from_numpy(material.parameter_array())
-    records = [ti.ndarray(kind, shape) for kind in (mat, mat, coeff, coeff, mat, mat, coeff)]
+    records = Records(**{name: ti.ndarray(coeff if name.startswith("coeff") else mat, shape)
+                         for name in Records.members})  # fmt: skip
     plastic = material.plastic
     components = plastic.components if isinstance(plastic, tm.PlasticMixture) else [(1, plastic)]
     single = len(components) == 1 and not isinstance(plastic, tm.WeaklyCompressibleFluid)
-    _constitutive(
-        F_trial,
-        F_corrected,
-        stress,
-        params,
-        *records,
-        material.elastic_kind,
-        int(material.elastic.needs_svd and single),
-        runtime.current().spectral_tol,
-    )
+    share_basis = material.elastic.needs_svd and single
+    _constitutive(F_trial, F_corrected, stress, records,
+                  arguments.material(params, material.elastic_kind, share_basis))  # fmt: skip
     return F_corrected.to_numpy()[0], stress.to_numpy()[0]
 
 
