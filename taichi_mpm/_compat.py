@@ -2,9 +2,9 @@
 
 Taichi has no public way to do what these functions do: build a kernel's body from plain
 Python while it compiles, read the compile configuration, forget a kernel, or change how its
-front end formats source positions. Each function here names what it reaches into, so that a
-Taichi upgrade is checked here alone (``tests/test_import_rules.py`` keeps every other module
-away from ``taichi.lang``).
+front end formats source positions, or release an argument pack safely at exit. Each function
+here names what it reaches into, so that a Taichi upgrade is checked here alone
+(``tests/test_import_rules.py`` keeps every other module away from ``taichi.lang``).
 
 Nothing here runs on import: a hook on Taichi's classes is installed only by the call that asks
 for it (:func:`shorten_source_positions` from :func:`taichi_mpm.init`, :func:`on_kernel_launch`
@@ -14,10 +14,12 @@ and :func:`on_compile` from the benchmark and the test that measure with them).
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
 from taichi.lang import impl
+from taichi.lang.argpack import ArgPack, ArgPackType
 from taichi.lang.kernel_impl import Kernel
 
 # ------------------------------------------------------------- building a kernel's body
@@ -147,3 +149,21 @@ def shorten_source_positions(is_short: Callable[[str], bool]) -> None:
 
     get_pos_info._shortened = True
     ASTTransformerContext.get_pos_info = get_pos_info
+
+
+class _Pack(ArgPack):
+    """An argument pack that leaves its memory to the process's end once the interpreter is
+    finalizing: Taichi 1.7's own release then reads module state already cleared and prints an
+    ignored exception for every pack still alive (one held by a module-level simulator)."""
+
+    def __del__(self, finalizing=sys.is_finalizing) -> None:
+        if not finalizing():
+            super().__del__()
+
+
+class PackType(ArgPackType):
+    """``ti.types.argpack`` whose instances are :class:`_Pack` (same members and checks)."""
+
+    def __call__(self, *args, **kwargs) -> ArgPack:
+        checked = super().__call__(*args, **kwargs)  # Taichi's conversions and checks
+        return _Pack(self.members, self.dtype, dict(checked.items))

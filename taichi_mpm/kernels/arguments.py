@@ -25,13 +25,12 @@ member name alone), so no two pack types here share an array's name (hence :data
 from __future__ import annotations
 
 import functools
-import sys
 from dataclasses import dataclass
 
 import taichi as ti
-from taichi.lang.argpack import ArgPack, ArgPackType
 
 from taichi_mpm import runtime
+from taichi_mpm._compat import ArgPack, PackType
 from taichi_mpm.scene import WALL_KINDS, Scene
 
 SLIP, STICKY, SEPARATE = 0, 1, 2  # wall_kind; slip is SEPARATE with zero friction
@@ -41,24 +40,6 @@ assert set(WALL_CODES) == set(WALL_KINDS)
 #: The particle state that one step carries to the next, in order, with each field's shape per
 #: particle: the simulator's checkpoints and ``Simulator.states``, and the bridge's tensors.
 CARRIED = {"x": (3,), "v": (3,), "C": (3, 3), "F": (3, 3)}
-
-
-class _Pack(ArgPack):
-    """An argument pack that leaves its memory to the process's end once the interpreter is
-    finalizing: Taichi 1.7's own release then reads module state already cleared and prints an
-    ignored exception for every pack still alive (one held by a module-level simulator)."""
-
-    def __del__(self, finalizing=sys.is_finalizing) -> None:
-        if not finalizing():
-            super().__del__()
-
-
-class PackType(ArgPackType):
-    """``ti.types.argpack`` whose instances are :class:`_Pack` (same members and checks)."""
-
-    def __call__(self, *args, **kwargs) -> ArgPack:
-        checked = super().__call__(*args, **kwargs)  # Taichi's conversions and checks
-        return _Pack(self.members, self.dtype, dict(checked.items))
 
 
 _array = ti.types.ndarray()
