@@ -10,6 +10,9 @@ Layout of ``runs/<id>/``::
                            feedback.txt, curves.json, artifacts.json (what the trusted fit
                            left: the captured data, the best trajectory)
     heap/iteration-NN.json the top of the heap after each iteration
+    provenance.json        what the run is measured against (the task's ``provenance``: an
+                           observation's hash, the truth it read), written when its first
+                           search starts and never rewritten
     summary.json           written when the run ends (the search's totals), completed by
                            the runner with what the run found (``findings``)
     run.lock               locked (``fcntl.flock``) by the one process that writes the run,
@@ -41,6 +44,7 @@ from sga_agent.config import SearchConfig, current_format
 from sga_agent.task import Evaluation
 
 CONFIG, EVENTS, SUMMARY, LOCK = "config.json", "events.jsonl", "summary.json", "run.lock"
+PROVENANCE = "provenance.json"
 #: The id of the task's seed solution, the first candidate of every run.
 SEED = "00-seed"
 #: A candidate's artifacts (what the trusted fit left for reports), beside its evaluation.
@@ -273,6 +277,16 @@ class RunStore:
         with _space(folder):
             folder.mkdir(exist_ok=True)
         _dump(folder / f"iteration-{iteration:02d}.json", top)
+
+    def record_provenance(self, provenance: dict[str, Any]) -> None:
+        """Write ``provenance.json`` unless the run has one (a resume keeps the first)."""
+        if not (self.path / PROVENANCE).is_file():
+            _dump(self.path / PROVENANCE, provenance)
+
+    def provenance(self) -> dict[str, Any] | None:
+        """What :meth:`record_provenance` wrote (None for a run that recorded none)."""
+        path = self.path / PROVENANCE
+        return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
 
     def save_summary(self, summary: dict[str, Any]) -> None:
         _dump(self.path / SUMMARY, summary)

@@ -138,6 +138,7 @@ def run(
         task = configured(registry.load_task(config.task), config.task_options)
     if proposer is None:
         proposer = make_proposer(config, task)
+    store.record_provenance(as_task(task).provenance(config.task_options))
     with make_pool(config) as pool:
         store.append(pool_record(pool))
         search = Search(config, task, proposer, pool, store, on_event)

@@ -120,7 +120,8 @@ def print_result(
     if best is not None and best.valid:
         console.print(_comparison(best.candidate, best.loss, seed))
         findings = summary.get("findings") or {}
-        for line in [*_truth_lines(findings), *as_task(task).screen_lines(findings)]:
+        verdict = [f"verdict: {findings['verdict']}"] if findings.get("verdict") else []
+        for line in [*_truth_lines(findings), *verdict, *as_task(task).screen_lines(findings)]:
             console.print(line)
         if best.parameters:
             console.print("its code, with the fitted constants written in:")

@@ -56,8 +56,13 @@ def summary_section(
     if assessment is not None and assessment.truth:
         lines.append(f"- ground truth: {assessment.truth}")
     lines.append(loss_line(findings))
+    if assessment is not None and assessment.verdict:
+        lines.append(f"- **verdict**: {assessment.verdict}")
     if task is not None:
         lines += task.summary_lines(view)
+    if findings.changed:
+        lines.append("- **changed since the run started** (this report names what the run "
+                     "recorded then): " + "; ".join(findings.changed))  # fmt: skip
     if findings.assessment_error:
         lines.append(f"- the task could not assess the best solution: {findings.assessment_error}")
     duration = f" in {findings.duration_s / 60:.1f} min" if findings.duration_s else ""

@@ -51,6 +51,7 @@ class Run:
     tokens: int = 0
     cost_usd: float = 0.0
     started: float | None = None  # the first event's time (seconds since the epoch)
+    provenance: dict[str, Any] | None = None  # what the task recorded at the start
 
     @property
     def task(self) -> str:
@@ -118,6 +119,7 @@ def read_run(path: Path) -> Run:
         config=current_format(_read_json(store.path / CONFIG, {}).get("config", {})),
         candidates=candidates,
         summary=_read_json(store.path / SUMMARY, None),
+        provenance=store.provenance(),
     )
     by_id = {candidate.id: candidate for candidate in candidates}
     for event in store.events():

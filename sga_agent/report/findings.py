@@ -5,11 +5,14 @@ The search-side facts (best and seed losses, the best solution with its fitted c
 come from the run folder; what only the task knows comes from its hooks (see
 :class:`sga_agent.task.TaskBase`): the ground truth, the true law's loss and the free run from
 ``assess``, facts about the top distinct solutions (a molecule's property in eV) from
-``top_facts``.
+``top_facts``. What the run recorded at its start (the task's ``provenance``: an observation's
+hash, the truth it read) is compared with what the task gives now; the task assesses with the
+recorded one (``with_provenance``).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +37,7 @@ class Findings:
     assessment_error: str = ""
     top_facts: list[dict[str, Any]] = field(default_factory=list)
     duration_s: float | None = None
+    changed: list[str] = field(default_factory=list)  # provenance that differs from the start's
 
     @property
     def seed_over_best(self) -> float | None:
@@ -64,6 +68,9 @@ class Findings:
             "parameters": self.best.parameters if self.best else {},
             "derived": assessment.get("derived", {}),
             "free_run": assessment.get("free_run"),
+            "held_out": assessment.get("held_out"),
+            "verdict": assessment.get("verdict") or None,
+            "changed_since_start": self.changed,
             "assessment_error": self.assessment_error or None,
             "molecules": self.top_facts,  # the key summary.json has always had
             "duration_s": self.duration_s,
@@ -81,6 +88,21 @@ def _brief(candidate: Candidate | None) -> dict[str, Any] | None:
         return None
     loss = candidate.loss if math.isfinite(candidate.loss) else "inf"
     return {"candidate": candidate.id, "loss": loss, "status": candidate.status}
+
+
+def changes(recorded: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """What differs between the provenance a run recorded at its start and the task's now,
+    one "key: recorded at the start, now" text each (long values shortened)."""
+    return [
+        f"{key}: {_short(recorded.get(key))} at the start, {_short(now.get(key))} now"
+        for key in sorted(set(recorded) | set(now))
+        if recorded.get(key) != now.get(key)
+    ]
+
+
+def _short(value: Any, width: int = 60) -> str:
+    text = json.dumps(value, default=str)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def law_key(task: Task | None, candidate: Candidate) -> str:
@@ -130,7 +152,13 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
             if options is None:
                 recorded = run.config.get("task_options") or {}
                 options = options_from_data(task.options_type, recorded, task.name)
-            findings.assessment = task.assess(best.artifacts(), best.parameters, options, simulate)
+            assessed = task
+            if run.provenance is not None:
+                findings.changed = changes(run.provenance, task.provenance(options))
+                assessed = as_task(task.with_provenance(run.provenance))
+            findings.assessment = assessed.assess(
+                best.artifacts(), best.parameters, options, simulate
+            )
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"
     findings.top_facts = task.top_facts(distinct(run, task))

@@ -151,6 +151,20 @@ class TaskBase:
 
     # ------------------------------------------------------------------ findings
 
+    def provenance(self, options: Any) -> dict[str, Any]:
+        """What a run with ``options`` is measured against, as JSON data recorded in the run
+        folder (``provenance.json``) when its search starts: the observation file's sha256,
+        the truth it read. A report compares it with what the task gives then, says what
+        changed, and hands the recorded one to :meth:`with_provenance`. Default: {} (nothing
+        to record)."""
+        return {}
+
+    def with_provenance(self, recorded: Mapping[str, Any]) -> TaskBase:
+        """The task set up to assess a run that recorded ``recorded`` (what :meth:`provenance`
+        returned when it started), so that :meth:`assess` names the truth the run was measured
+        against even when the files have changed since. Default: the task itself."""
+        return self
+
     def assess(
         self,
         artifacts: dict[str, Any] | None,

@@ -181,17 +181,27 @@ class Assessment:
         ``FreeRun``: simulated from the initial state without teacher forcing). The agent only
         calls its ``to_dict()`` (``summary.json``'s ``free_run``); the task's report hooks
         read the rest.
+    held_out : object, optional
+        The same record of the best solution on a held-out scene: an observation it was not
+        fitted to (``summary.json``'s ``held_out``).
+    verdict : str
+        One plain sentence: whether the best solution does what was asked (reproduces the
+        observed motion), by the task's own thresholds ("" when the task cannot tell).
     """
 
     truth: str = ""
     truth_loss: float | None = None
     derived: dict[str, float] = field(default_factory=dict)
     free_run: Any = None
+    held_out: Any = None
+    verdict: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "truth": self.truth, "truth_loss": self.truth_loss, "derived": self.derived,
             "free_run": None if self.free_run is None else self.free_run.to_dict(),
+            "held_out": None if self.held_out is None else self.held_out.to_dict(),
+            "verdict": self.verdict,
         }  # fmt: skip
 
 

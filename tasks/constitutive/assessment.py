@@ -2,8 +2,10 @@
 
 Trusted: nothing here loads or runs candidate code. The true law is the task's own ground
 truth (its taichi_mpm material, written in torch by :func:`bridges.laws.from_material`); the
-best law is rebuilt from the graph the capture recorded (:func:`build_law`), with its fitted
-values loaded. The true law's loss is cached beside the cached ground truth.
+best law is rebuilt from the graph the capture recorded (:func:`fitted_law`), with its fitted
+values loaded, and run freely on the training scene and on the held-out one
+(:mod:`tasks.constitutive.held_out`). The true law's loss is cached beside the cached ground
+truth.
 """
 
 from __future__ import annotations
@@ -11,56 +13,29 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 import torch
 
 import taichi_mpm as tm
 from bridges import laws as torch_laws
-from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
+from bridges.rollout import Rollout, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Assessment
-from taichi_mpm.frames import evenly_spaced
-from tasks.constitutive.evaluation import (
-    check_precision,
-    ensure_runtime,
-    ground_truth,
-    known_elastic_law,
-)
+from tasks.constitutive.evaluation import check_precision, ensure_runtime, ground_truth
 from tasks.constitutive.free_run import FreeRun
+from tasks.constitutive.free_sim import fitted_law, free_run_in
 from tasks.constitutive.ground_truth import cache_dir, cache_key
-from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target, build_law
+from tasks.constitutive.held_out import held_out_error
+from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target
 from tasks.constitutive.options import ConstitutiveOptions
-from tasks.constitutive.specs import (
-    ELASTIC_TRUTH,
-    FRICTION_ANGLE,
-    KNOWN_ELASTIC,
-    MIXTURE,
-    YIELD_STRESS,
-    ConstitutiveSpec,
-)
+from tasks.constitutive.specs import ConstitutiveSpec
+from tasks.constitutive.verdict import verdict
 
-#: Frames of the free run kept for reports (the first and the last included).
-FRAMES = 31
-_GIVEN = f"elastic law given: StVK on the Hencky strain, E = {KNOWN_ELASTIC.E:g} Pa, " \
-    f"nu = {KNOWN_ELASTIC.nu:g}"  # fmt: skip
-_PLASTIC_NAMES = {
-    "von_mises": f"von Mises on the Hencky strain, yield stress {YIELD_STRESS:g} Pa",
-    "sand": f"Drucker-Prager sand, friction angle {FRICTION_ANGLE:g} degrees, no cohesion",
-    "fluid": "weakly compressible fluid (F reset to J^(1/3) I)",
-}
-
-
-def truth_name(spec: ConstitutiveSpec) -> str:
-    """The ground truth in words, with its values."""
-    if spec.truth == "neo_hookean":
-        return (f"neo-Hookean, E = e^{math.log(ELASTIC_TRUTH['E']):g} Pa, "
-                f"nu = {ELASTIC_TRUTH['nu']:g}")  # fmt: skip
-    if spec.truth == "mixture":
-        parts = " + ".join(f"{weight:g} {name.replace('_', ' ')}" for name, weight in MIXTURE)
-        return f"mixture {parts} ({_GIVEN})"
-    return f"{_PLASTIC_NAMES[spec.truth]} ({_GIVEN})"
+#: The verdict when the truth has changed since the run started.
+STALE = ("not judged: the ground truth is not the one the run was measured against (it changed "
+         "since the run started), so nothing was simulated")  # fmt: skip
 
 
 def truth_loss(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> float:
@@ -88,48 +63,13 @@ def truth_loss(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> float:
 def free_run(
     spec: ConstitutiveSpec, graph: Any, parameters: dict[str, float], options: ConstitutiveOptions
 ) -> FreeRun:
-    """The law of ``graph`` with its fitted ``parameters``, simulated from the initial state
-    without teacher forcing, against the observation.
-
-    The error of a step is the root mean square over particles of the distance between
-    simulated and observed positions, divided by the body's size (the largest side of its
-    initial bounding box). An unstable law gives infinite errors.
-    """
+    """The law of ``graph`` with its fitted ``parameters``, simulated through the training
+    scene from its initial state without teacher forcing, against the observation (see
+    :func:`~tasks.constitutive.free_sim.free_run_in`)."""
     ensure_runtime(options.precision or "float32")
-    dtype = torch_dtype()
-    law = fitted_law(graph, parameters, dtype)
+    law = fitted_law(graph, parameters, torch_dtype())
     observed = ground_truth(spec, options.steps).positions
-    scene = tm.paper_scene(steps=observed.shape[0] - 1)
-    if spec.searched == "elastic":
-        rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
-    else:
-        rollout = Rollout(scene, law, known_elastic_law(dtype))
-    size = float(np.ptp(observed[0], axis=0).max())
-    frames = evenly_spaced(0, scene.steps, FRAMES)
-    try:
-        result = trajectory_loss(rollout, observed, None, spec.reset_every, backward=False)
-    except UnstableSimulation as error:
-        return FreeRun(math.inf, math.inf, size, scene.steps, unstable=str(error))
-    errors = np.sqrt(((result.positions - observed) ** 2).sum(axis=-1).mean(axis=-1)) / size
-    return FreeRun(
-        final_error=float(errors[-1]), mean_error=float(errors.mean()), body_size=size,
-        steps=scene.steps, frames=frames.tolist(), positions=result.positions[frames],
-        observed=observed[frames],
-    )  # fmt: skip
-
-
-def fitted_law(graph: Any, parameters: dict[str, float], dtype: torch.dtype) -> torch.nn.Module:
-    """The law rebuilt from its captured graph, its parameters set to the fitted values
-    (``name`` or ``name[i]`` for an element of a tensor parameter, as the fit records them)."""
-    law = build_law(graph, dtype)
-    with torch.no_grad():
-        for name, parameter in law.named_parameters():
-            flat = parameter.view(-1)
-            for index in range(flat.numel()):
-                key = name if flat.numel() == 1 else f"{name}[{index}]"
-                if key in parameters:
-                    flat[index] = parameters[key]
-    return law.requires_grad_(False)
+    return free_run_in(spec, law, tm.paper_scene(steps=observed.shape[0] - 1), observed)
 
 
 # ------------------------------------------------------------------ readable parameters
@@ -272,14 +212,25 @@ def assess(
     parameters: dict[str, float],
     options: ConstitutiveOptions,
     simulate: bool,
+    recorded: Mapping[str, Any] | None = None,
 ) -> Assessment:
-    """The ground truth's name and loss, the best law's readable values and its free run."""
+    """The ground truth's name and loss, the best law's readable values, its free runs on the
+    training and the held-out scene, and the verdict on them.
+
+    ``recorded`` is what the run recorded at its start (:func:`provenance`); when its truth is
+    not the task's now, that truth is named and nothing is simulated (the cached observations
+    are another material's).
+    """
     check_precision(options.precision)
     graph = ((artifacts or {}).get("captured") or {}).get("law")
-    found = Assessment(truth=truth_name(spec), truth_loss=truth_loss(spec, options))
+    if recorded is not None and recorded.get("truth", spec.truth_name) != spec.truth_name:
+        return Assessment(truth=str(recorded["truth"]), verdict=STALE)
+    found = Assessment(truth=spec.truth_name, truth_loss=truth_loss(spec, options))
     if graph is None:
         return found
     found.derived = derived_values(graph, parameters)
     if simulate:
         found.free_run = free_run(spec, graph, parameters, options)
+        found.held_out = held_out_error(spec, graph, parameters, options)
+        found.verdict = verdict(found.held_out, found.free_run)
     return found

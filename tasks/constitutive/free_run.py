@@ -16,7 +16,8 @@ class FreeRun:
     observation: the root-mean-square position error at the last step and averaged over the
     steps, in units of the body's size (``body_size``, m); infinite when the simulation blew up
     (``unstable`` says where). ``frames`` are steps at which ``positions`` and ``observed``
-    ((frames, N, 3) arrays, for pictures; not part of :meth:`to_dict`) were kept."""
+    ((frames, N, 3) arrays, for pictures; not part of :meth:`to_dict`) were kept. ``scene``
+    names where it ran ("training scene", "held-out scene")."""
 
     final_error: float
     mean_error: float
@@ -26,12 +27,14 @@ class FreeRun:
     positions: Any = None
     observed: Any = None
     unstable: str = ""
+    scene: str = "training scene"
 
     def to_dict(self) -> dict[str, Any]:
         """The numbers, JSON-ready (an infinite error as the string "inf")."""
         return {
             "final_error": _encode(self.final_error), "mean_error": _encode(self.mean_error),
             "body_size": self.body_size, "steps": self.steps, "unstable": self.unstable,
+            "scene": self.scene,
         }  # fmt: skip
 
 

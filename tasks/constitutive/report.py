@@ -17,34 +17,45 @@ MOTION_FRAMES, GIF_FPS = 4, 10
 
 
 def free_run_line(assessment: Assessment | None, simulate: bool) -> list[str]:
-    """The free-run error in body sizes, as the summary's line (none without a free run)."""
-    run = assessment.free_run if assessment else None
-    if run is None:
+    """The free-run errors in body sizes on the training and the held-out scene, as the
+    summary's lines (none without a free run)."""
+    runs = [run for run in (assessment.free_run, assessment.held_out) if run] if assessment else []
+    if not runs:
         if assessment is not None and assessment.truth and not simulate:
             return ["- free run: skipped (`--no-motion`)"]
         return []
-    if run.unstable:
-        return [f"- free run of the best law: unstable ({run.unstable})"]
-    return [
-        f"- free run of the best law (from the initial state, no teacher forcing, "
-        f"{run.steps} steps): RMS position error **{100 * run.final_error:.3g}%** of the body "
-        f"size at the end, {100 * run.mean_error:.3g}% on average (body size "
-        f"{run.body_size:.3g} m)"
-    ]
+    lines = []
+    for run in runs:
+        where = f"on the **{run.scene}**"
+        if run.unstable:
+            lines.append(f"- free run of the best law {where}: unstable ({run.unstable})")
+            continue
+        lines.append(
+            f"- free run of the best law {where} (from the initial state, no teacher forcing, "
+            f"{run.steps} steps): RMS position error **{100 * run.final_error:.3g}%** of the "
+            f"body size at the end, {100 * run.mean_error:.3g}% on average (body size "
+            f"{run.body_size:.3g} m)"
+        )
+    return lines
 
 
 def free_run_screen_lines(findings: dict[str, Any]) -> list[str]:
-    """The best law's free-run error, for the end of a search's screen (from summary.json)."""
-    free = findings.get("free_run")
-    if not free:
-        return []
-    if free.get("unstable"):
-        return [f"free run of the best: unstable ({free['unstable']})"]
-    return [
-        f"free run of the best (no teacher forcing): RMS position error "
-        f"{100 * free['final_error']:.3g}% of the body size at the end, "
-        f"{100 * free['mean_error']:.3g}% on average"
-    ]
+    """The best law's free-run errors on the training and the held-out scene, for the end of
+    a search's screen (from summary.json)."""
+    lines = []
+    for free in (findings.get("free_run"), findings.get("held_out")):
+        if not free:
+            continue
+        where = f"on the {free.get('scene', 'training scene')}"
+        if free.get("unstable"):
+            lines.append(f"free run of the best {where}: unstable ({free['unstable']})")
+            continue
+        lines.append(
+            f"free run of the best {where} (no teacher forcing, {free['steps']} steps): RMS "
+            f"position error {100 * float(free['final_error']):.3g}% of the body size at the "
+            f"end, {100 * float(free['mean_error']):.3g}% on average"
+        )
+    return lines
 
 
 def motion_section(view: ReportView) -> Section:

@@ -28,6 +28,13 @@ ELASTIC_TRUTH = {"E": math.exp(13.0), "nu": 0.245}
 YIELD_STRESS = 3e4  # Pa, von Mises on the Hencky strain
 FRICTION_ANGLE = 25.0  # degrees, Drucker-Prager sand without cohesion
 MIXTURE = (("von_mises", 0.5), ("sand", 0.3), ("fluid", 0.2))
+_GIVEN = f"elastic law given: StVK on the Hencky strain, E = {KNOWN_ELASTIC.E:g} Pa, " \
+    f"nu = {KNOWN_ELASTIC.nu:g}"  # fmt: skip
+_PLASTIC_NAMES = {
+    "von_mises": f"von Mises on the Hencky strain, yield stress {YIELD_STRESS:g} Pa",
+    "sand": f"Drucker-Prager sand, friction angle {FRICTION_ANGLE:g} degrees, no cohesion",
+    "fluid": "weakly compressible fluid (F reset to J^(1/3) I)",
+}
 
 
 @dataclass(frozen=True)
@@ -61,6 +68,17 @@ class ConstitutiveSpec:
             else laws[self.truth]
         )
         return tm.Material(tm.StVKHencky(KNOWN_ELASTIC.E, KNOWN_ELASTIC.nu), plastic)
+
+    @property
+    def truth_name(self) -> str:
+        """The ground truth in words, with its values."""
+        if self.truth == "neo_hookean":
+            return (f"neo-Hookean, E = e^{math.log(ELASTIC_TRUTH['E']):g} Pa, "
+                    f"nu = {ELASTIC_TRUTH['nu']:g}")  # fmt: skip
+        if self.truth == "mixture":
+            parts = " + ".join(f"{weight:g} {name.replace('_', ' ')}" for name, weight in MIXTURE)
+            return f"mixture {parts} ({_GIVEN})"
+        return f"{_PLASTIC_NAMES[self.truth]} ({_GIVEN})"
 
     @property
     def seed(self) -> str:

@@ -7,7 +7,8 @@ graph (in the trusted fit worker, which never runs the law's code).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import copy
+from collections.abc import Iterator, Mapping
 from types import MappingProxyType
 from typing import Any
 
@@ -42,6 +43,9 @@ class ConstitutiveTask(TaskBase):
     #: What the capture server loads before it confines a capture (see law_capture).
     capture_modules = ("numpy", "torch", "torch.nn", "torch.nn.functional", "torch.linalg",
                        "tasks.constitutive.law_capture")  # fmt: skip
+
+    #: What the run being assessed recorded at its start (:meth:`with_provenance`).
+    recorded: Mapping[str, Any] | None = None
 
     def __init__(self, spec: ConstitutiveSpec) -> None:
         self.spec = spec
@@ -103,6 +107,16 @@ class ConstitutiveTask(TaskBase):
         untagged = "".join(line for line in lines if not line.startswith(GENOME_TAG))
         return with_fitted_values(untagged, parameters)
 
+    def provenance(self, options: ConstitutiveOptions) -> dict[str, Any]:
+        """The ground truth in words, with its values."""
+        return {"truth": self.spec.truth_name}
+
+    def with_provenance(self, recorded: Mapping[str, Any]) -> ConstitutiveTask:
+        """A copy that assesses against the truth ``recorded`` at the run's start."""
+        task = copy.copy(self)
+        task.recorded = dict(recorded)
+        return task
+
     def assess(
         self,
         artifacts: dict[str, Any] | None,
@@ -110,25 +124,27 @@ class ConstitutiveTask(TaskBase):
         options: ConstitutiveOptions,
         simulate: bool,
     ) -> Assessment:
-        """The ground truth's name and loss, the best law's derived values (``exp(log_E)``) and
-        its free run, from its captured graph (its code is not run)."""
+        """The ground truth's name and loss, the best law's derived values (``exp(log_E)``),
+        its free runs on the training and the held-out scene and the verdict, from its captured
+        graph (its code is not run)."""
         from tasks.constitutive.assessment import assess
 
-        return assess(self.spec, artifacts, parameters, options, simulate)
+        return assess(self.spec, artifacts, parameters, options, simulate, self.recorded)
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the true law's loss (cached after the first time)" + (
-            " and the free run (the first run compiles Taichi's kernels: up to a minute)"
+            " and the free runs on the training and the held-out scene (the first run compiles "
+            "Taichi's kernels and simulates the held-out ground truth: up to two minutes)"
             if simulate
             else ""
         )
 
     def screen_lines(self, findings: dict[str, Any]) -> list[str]:
-        """The best law's free-run error."""
+        """The best law's free-run errors on the training and the held-out scene."""
         return report.free_run_screen_lines(findings)
 
     def summary_lines(self, view: ReportView) -> list[str]:
-        """The best law's free-run error in body sizes."""
+        """The best law's free-run errors in body sizes, training and held-out scene."""
         return report.free_run_line(view.assessment, view.simulate)
 
     def report_sections(self, view: ReportView) -> list[Section]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -106,3 +107,23 @@ def read_truth(observation: str | Path) -> dict[str, Any] | None:
                 "parameters": {str(k): float(v) for k, v in truth["parameters"].items()}}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
+
+
+def file_sha256(path: str | Path) -> str | None:
+    """The sha256 of the file at ``path`` (None when it cannot be read)."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def provenance(observation: str, validation: str | None) -> dict[str, Any]:
+    """What a run is measured against: the observation file and its sha256, the hidden truth
+    beside it (as :func:`read_truth` reads it), and the validation file and its sha256."""
+    record: dict[str, Any] = {
+        "observation": observation, "observation_sha256": file_sha256(observation),
+        "truth": read_truth(observation),
+    }  # fmt: skip
+    if validation is not None:
+        record |= {"validation": validation, "validation_sha256": file_sha256(validation)}
+    return record

@@ -5,14 +5,15 @@ fitted with the constitutive tasks' inner optimization, here without teacher for
 observation has positions only): one rollout from the initial state per epoch, its loss the
 mean squared error over the observed frames and particles, the gradient carried back across
 checkpointed segments of ``segment`` steps. The hidden truth beside the observation file is
-read by :func:`assess` alone, for reports.
+read by :func:`assess` alone, for reports (and recorded when a run starts, see
+:func:`tasks.observed.data.provenance`).
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,7 @@ from sga_agent.task import Assessment, Evaluation, EvaluationSettings
 from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.sysid.families import FAMILIES, material_family
 from tasks.constitutive import feedback
-from tasks.constitutive.assessment import derived_values, fitted_law
+from tasks.constitutive.assessment import derived_values
 from tasks.constitutive.evaluation import (
     check_precision,
     ensure_runtime,
@@ -34,13 +35,18 @@ from tasks.constitutive.evaluation import (
     warm_up_fitting,
 )
 from tasks.constitutive.free_run import FreeRun
+from tasks.constitutive.free_sim import fitted_law
 from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law
-from tasks.observed.data import ObservedData, read_truth
+from tasks.constitutive.verdict import verdict
+from tasks.observed.data import ObservedData, provenance
 from tasks.observed.options import ObservedOptions
 
 EPOCHS, LEARNING_RATE = 30, 3e-2  # the constitutive tasks' inner defaults
+#: The verdict when an observed file has changed since the run started.
+STALE = ("not judged: the observation (or validation) file has changed since the run started, "
+         "so nothing was simulated against it")  # fmt: skip
 
 
 def known_elastic(options: ObservedOptions, dtype: torch.dtype) -> torch.nn.Module:
@@ -139,17 +145,30 @@ def _xyz(point: np.ndarray) -> str:
 
 
 def assess(
-    artifacts: dict[str, Any] | None, parameters: dict[str, float], options: ObservedOptions,
+    artifacts: dict[str, Any] | None,
+    parameters: dict[str, float],
+    options: ObservedOptions,
     simulate: bool,
+    recorded: Mapping[str, Any] | None = None,
 ) -> Assessment:
-    """The hidden truth (from the file beside the observation, if any) with its loss scored
-    like a candidate's without fitting, the best law's readable values and its free run."""
+    """The hidden truth with its loss scored like a candidate's without fitting, the best
+    law's readable values, its free runs on the observation and on the validation file (the
+    held-out scene) and the verdict.
+
+    ``recorded`` is what the run recorded at its start (:func:`~tasks.observed.data.
+    provenance`): its truth is the one named; when an observed file has changed since, nothing
+    is simulated (the file is no longer what the run was fitted to).
+    """
     data, dtype = setup(options)
-    found = Assessment()
-    truth = read_truth(options.observation)
-    if truth is not None:
-        values = ", ".join(f"{k} = {v:g}" for k, v in truth["parameters"].items())
-        found.truth = f"{FAMILIES[truth['family']]}; {values} (hidden from the search)"
+    now = provenance(options.observation, options.validation)
+    truth = now["truth"] if recorded is None else recorded.get("truth")
+    found = Assessment(truth=_truth_text(truth) if truth else "")
+    if recorded is not None and any(
+        recorded.get(key) != now.get(key) for key in ("observation_sha256", "validation_sha256")
+    ):
+        found.verdict = STALE
+        return found
+    if truth:
         material = material_family(truth["family"], **truth["parameters"])
         plastic, elastic = torch_laws.from_material(material, dtype)
         rollout = Rollout(data.scene, plastic.requires_grad_(False), elastic.requires_grad_(False))
@@ -161,8 +180,19 @@ def assess(
         return found
     found.derived = derived_values(graph, parameters)
     if simulate:
-        found.free_run = free_run(fitted_law(graph, parameters, dtype), data, options, dtype)
+        law = fitted_law(graph, parameters, dtype)
+        found.free_run = free_run(law, data, options, dtype)
+        if options.validation is not None:
+            held_out = ObservedData.load(options.validation)
+            found.held_out = free_run(law, held_out, options, dtype)
+            found.held_out.scene = "held-out scene"
+        found.verdict = verdict(found.held_out, found.free_run)
     return found
+
+
+def _truth_text(truth: Mapping[str, Any]) -> str:
+    values = ", ".join(f"{k} = {v:g}" for k, v in truth["parameters"].items())
+    return f"{FAMILIES[truth['family']]}; {values} (hidden from the search)"
 
 
 def free_run(

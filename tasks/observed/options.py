@@ -19,7 +19,10 @@ class ObservedOptions:
     elastic law then known: family ``elastic`` with Young's modulus ``E`` (Pa) and Poisson's
     ratio ``nu``). ``frames``: fit only the first this many observed frames after t = 0
     (default all). ``segment``: steps per checkpointed segment of the backward pass.
-    ``optimizer`` and ``precision`` as in the constitutive tasks."""
+    ``optimizer`` and ``precision`` as in the constitutive tasks. ``validation``: a second
+    observation (``.npz``) of the same material in another scene, never fitted: the best law's
+    free run there is its held-out error; checked here too (readable, not the observation
+    itself, the same density, and the same hidden truth where both files have one)."""
 
     observation: str | None = None
     searched: Literal["elastic", "plastic"] | None = None
@@ -30,6 +33,7 @@ class ObservedOptions:
     segment: int = 50
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
+    validation: str | None = None
 
     def __post_init__(self) -> None:
         from tasks.observed.data import read_observation
@@ -52,6 +56,37 @@ class ObservedOptions:
         if self.segment < 1:
             raise ValueError(f"option 'segment' must be at least 1, got {self.segment}")
         self._check_elastic()
+        if self.validation is not None:
+            object.__setattr__(self, "validation", self._checked_validation(observation))
+
+    def _checked_validation(self, observation) -> str:
+        from tasks.observed.data import read_observation, read_truth
+
+        path = Path(self.validation).expanduser().resolve()
+        if str(path) == self.observation:
+            raise ValueError("option 'validation' names the observation itself: give a second "
+                             "observation of the same material in another scene")  # fmt: skip
+        try:
+            validation = read_observation(path)
+        except ValueError as error:  # the sysid loader's ObservationError
+            raise ValueError(f"option 'validation': {error}") from None
+        if not (validation.frame_steps > 0).any():
+            raise ValueError(f"option 'validation': {path} has no frame after t = 0 to compare "
+                             "a free run with")  # fmt: skip
+        if validation.scene.density != observation.scene.density:
+            raise ValueError(
+                f"option 'validation': {path} has density {validation.scene.density:g} kg/m^3, "
+                f"the observation {observation.scene.density:g}: a validation file must observe "
+                "the same material"
+            )
+        truths = read_truth(self.observation), read_truth(path)
+        if None not in truths and truths[0] != truths[1]:
+            raise ValueError(
+                f"option 'validation': the hidden truth beside {path.name} ({truths[1]}) is not "
+                f"the observation's ({truths[0]}): a validation file must observe the same "
+                "material"
+            )
+        return str(path)
 
     def _check_elastic(self) -> None:
         given = [name for name in ("E", "nu") if getattr(self, name) is not None]

@@ -5,6 +5,8 @@ particles at some frames), named by ``--option observation=PATH.npz``; ``--optio
 searched=plastic`` (with the known elastic law: ``elastic=FAMILY``, ``E``, ``nu``) or
 ``searched=elastic`` says which part of the law is searched. Laws are proposed, captured and
 checked exactly as in the constitutive tasks; the fit runs without teacher forcing.
+``--option validation=PATH.npz``, a second observation of the same material in another scene,
+is the held-out scene of the report's free run.
 """
 
 from __future__ import annotations
@@ -27,7 +29,6 @@ class ObservedTask(ConstitutiveTask):
 
     options_type = ObservedOptions
     loss_label = "loss"  # the observation's units are the file's
-    draws_motion = False  # not (yet) for an observation
 
     def __init__(self, options: ObservedOptions | None = None) -> None:
         self.options = options
@@ -85,11 +86,18 @@ class ObservedTask(ConstitutiveTask):
         options: ObservedOptions,
         simulate: bool,
     ) -> Assessment:
-        """The hidden truth beside the observation (if written there) and its loss, the best
-        law's readable values and its free run against the observed particles."""
+        """The hidden truth beside the observation (if written there; the one recorded when the
+        run started) and its loss, the best law's readable values, its free runs against the
+        observed particles and the validation file's, and the verdict."""
         from tasks.observed.evaluation import assess
 
-        return assess(artifacts, parameters, options, simulate)
+        return assess(artifacts, parameters, options, simulate, self.recorded)
+
+    def provenance(self, options: ObservedOptions) -> dict[str, Any]:
+        """The observation's (and validation's) path and sha256, the hidden truth beside it."""
+        from tasks.observed.data import provenance
+
+        return provenance(options.observation, options.validation)
 
     def builtin_proposer(self) -> BuiltinProposer:
         """Genetic programming over law code, seeded by the searched part's seed law."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import struct
@@ -16,7 +17,7 @@ from sga_agent.report.plots import DPI, curves_size
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
-from sga_agent.task import Evaluation
+from sga_agent.task import Assessment, Evaluation, as_task
 from tests.sga_agent.test_search import LAW, FakeTask, LossInCode, Scripted, config
 
 
@@ -229,8 +230,17 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     assert free["mean_error"] == pytest.approx(mean, rel=1e-3)
     # the search wrote the same findings into summary.json
     summary = json.loads((run_dir / "summary.json").read_text())
-    for key in ("seed", "best", "truth", "truth_loss", "best_solution", "free_run"):
+    for key in ("seed", "best", "truth", "truth_loss", "best_solution", "free_run", "held_out",
+                "verdict"):
         assert summary["findings"][key] == found[key], key
+    # the held-out scene (120 steps for a 200-step training scene) and the verdict on it
+    held_out = found["held_out"]
+    assert held_out["scene"] == "held-out scene" and held_out["steps"] == 120
+    assert free["scene"] == "training scene"
+    assert f"{100 * held_out['final_error']:.2g} % free-run error on the held-out" in found[
+        "verdict"]  # fmt: skip
+    assert json.loads((run_dir / "provenance.json").read_text()) == {"truth": found["truth"]}
+    assert found["changed_since_start"] == []
     assert summary["best"]["candidate"] == best  # the existing keys stay
     # the pages state them, and the pictures have their sizes
     md = (run_dir / "report" / "report.md").read_text()
@@ -239,6 +249,8 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     assert f"the seed's {found['seed']['loss']:.4g}" in summary_part
     assert f"the true law's: {found['truth_loss']:.4g}" in summary_part
     assert f"**{100 * free['final_error']:.3g}%** of the body size" in summary_part
+    assert f"**{100 * held_out['final_error']:.3g}%** of the body size" in summary_part
+    assert f"- **verdict**: {found['verdict']}" in summary_part
     assert found["best_solution"].strip() in summary_part
     folder = run_dir / "report"
     page = (folder / "report.html").read_text()
@@ -297,3 +309,64 @@ def test_the_runner_adds_the_findings_the_search_core_leaves_out(tmp_path):
     assert findings["seed"]["loss"] == 100.0 and findings["seed_over_best"] == 100.0
     assert findings["truth"] is None and findings["free_run"] is None  # FakeTask assesses nothing
     assert findings["molecules"] == []
+
+
+class _Run:
+    """A free run's record, as a task's assessment holds one."""
+
+    def __init__(self, error: float) -> None:
+        self.error = error
+
+    def to_dict(self) -> dict:
+        return {"final_error": self.error, "scene": "held-out scene"}
+
+
+class MeasuredTask(FakeTask):
+    """A task that records what it is measured against (a file's hash) and assesses with
+    what was recorded: the double of a task whose observation file can change."""
+
+    digest = "aaaa"
+
+    def provenance(self, options) -> dict:
+        return {"observation_sha256": self.digest}
+
+    def with_provenance(self, recorded):
+        task = MeasuredTask()
+        task.digest = recorded["observation_sha256"]
+        return task
+
+    def assess(self, artifacts, parameters, options, simulate):
+        return Assessment(truth=f"the truth of {self.digest}", held_out=_Run(0.25),
+                          verdict="the best law does not reproduce the motion")  # fmt: skip
+
+
+def test_a_report_says_what_changed_since_the_run_started(tmp_path, monkeypatch):
+    """The runner records the task's provenance when the search starts; the findings hand
+    it back to the task (``with_provenance``) and list what differs from the task's now; the
+    held-out record and the verdict reach summary.json and the report."""
+    from sga_agent import runner
+
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
+    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    runner.run(cfg, store, proposer=Scripted(answers), task=MeasuredTask())
+    assert store.provenance() == {"observation_sha256": "aaaa"}
+    findings = store.summary()["findings"]
+    assert findings["held_out"] == {"final_error": 0.25, "scene": "held-out scene"}
+    assert findings["verdict"] == "the best law does not reproduce the motion"
+    assert findings["changed_since_start"] == []
+
+    monkeypatch.setattr(MeasuredTask, "digest", "bbbb")  # the file was rewritten since
+    monkeypatch.setattr("sga_agent.report.build.load_or_none",
+                        lambda name: as_task(MeasuredTask()))  # fmt: skip
+    result = CliRunner().invoke(main, ["report", str(store.path), "--json"])
+    assert result.exit_code == 0, result.output
+    found = json.loads(result.stdout)["findings"]
+    assert found["truth"] == "the truth of aaaa"  # the recorded one, handed back to the task
+    assert found["changed_since_start"] == ['observation_sha256: "aaaa" at the start, "bbbb" now']
+    md = (store.path / "report" / "report.md").read_text()
+    assert "- **verdict**: the best law does not reproduce the motion" in md
+    assert '**changed since the run started** (this report names what the run recorded ' \
+        'then): observation_sha256: "aaaa" at the start, "bbbb" now' in md  # fmt: skip
