@@ -100,7 +100,7 @@ def changes(recorded: dict[str, Any], now: dict[str, Any]) -> list[str]:
     ]
 
 
-def _short(value: Any, width: int = 60) -> str:
+def _short(value: Any, width: int = 120) -> str:
     text = json.dumps(value, default=str)
     return text if len(text) <= width else text[: width - 3] + "..."
 

@@ -1,9 +1,9 @@
 """Whether a run's best law reproduces the observed motion, said in words.
 
-Light (no torch, no Taichi). The judge is the free run (no teacher forcing) on the held-out
-scene when there is one, else on the training scene: its RMS position error at the end, in
+Light (no torch, no Taichi). The judges are the free runs (no teacher forcing) on the held-out
+scene, where there is one, and on the training scene: their RMS position errors at the end, in
 body sizes, against :data:`THRESHOLDS` (the end, where a law's errors have added up: over a
-short scene the average hides them).
+short scene the average hides them). A law reproduces the motion when every one is within.
 """
 
 from __future__ import annotations
@@ -33,18 +33,25 @@ ADVICE = "try a longer --time-budget or a model"
 def verdict(
     held_out: FreeRun | None, training: FreeRun | None, thresholds: Thresholds = THRESHOLDS
 ) -> str:
-    """One sentence: whether the best law reproduces the motion ("" without a free run)."""
-    run, where = (held_out, "the held-out scene") if held_out else (training, "the training scene")
-    if run is None:
+    """One sentence: whether the best law reproduces the motion, on the held-out scene and on
+    the training scene, each within ``thresholds.reproduces`` ("" without a free run)."""
+    runs = [(run, where) for run, where in ((held_out, "the held-out scene"),
+                                            (training, "the training scene")) if run]  # fmt: skip
+    if not runs:
         return ""
-    limit = f"{_percent(thresholds.reproduces)} at most"
-    if run.unstable or not math.isfinite(run.final_error):
-        return (f"the best law does not reproduce the motion: its free run on {where} is "
+    unstable = [where for run, where in runs if run.unstable or not math.isfinite(run.final_error)]
+    if unstable:
+        return (f"the best law does not reproduce the motion: its free run on {unstable[0]} is "
                 f"unstable; {ADVICE}")  # fmt: skip
-    error = f"{_percent(run.final_error)} free-run error on {where} ({limit})"
-    if run.final_error <= thresholds.reproduces:
-        return f"the best law reproduces the motion: {error}"
-    return f"the best law does not reproduce the motion: {error}; {ADVICE}"
+    errors = ", ".join(
+        f"{_percent(run.final_error)} free-run error on {where}" if index == 0
+        else f"{_percent(run.final_error)} on {where}"
+        for index, (run, where) in enumerate(runs)
+    )  # fmt: skip
+    limit = f"{_percent(thresholds.reproduces)} at most" + (" on each" if len(runs) > 1 else "")
+    if all(run.final_error <= thresholds.reproduces for run, _ in runs):
+        return f"the best law reproduces the motion: {errors} ({limit})"
+    return f"the best law does not reproduce the motion: {errors} ({limit}); {ADVICE}"
 
 
 def _percent(fraction: float) -> str:

@@ -155,9 +155,9 @@ def assess(
     law's readable values, its free runs on the observation and on the validation file (the
     held-out scene) and the verdict.
 
-    ``recorded`` is what the run recorded at its start (:func:`~tasks.observed.data.
-    provenance`): its truth is the one named; when an observed file has changed since, nothing
-    is simulated (the file is no longer what the run was fitted to).
+    ``recorded`` is what the run recorded at its start (see
+    :func:`~tasks.observed.data.provenance`): its truth is the one named; when an observed file
+    has changed since, nothing is simulated (the file is no longer what the run was fitted to).
     """
     data, dtype = setup(options)
     now = provenance(options.observation, options.validation)

@@ -93,6 +93,13 @@ class ObservedTask(ConstitutiveTask):
 
         return assess(artifacts, parameters, options, simulate, self.recorded)
 
+    def describe_assessment(self, simulate: bool) -> str:
+        return "assessing the best solution: the hidden truth's loss" + (
+            " and the free runs on the observation and the validation file (if given)"
+            if simulate
+            else ""
+        )
+
     def provenance(self, options: ObservedOptions) -> dict[str, Any]:
         """The observation's (and validation's) path and sha256, the hidden truth beside it."""
         from tasks.observed.data import provenance
