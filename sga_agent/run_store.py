@@ -12,7 +12,8 @@ Layout of ``runs/<id>/``::
     heap/iteration-NN.json the top of the heap after each iteration
     provenance.json        what the run is measured against (the task's ``provenance``: an
                            observation's hash, the truth it read), written when its first
-                           search starts and never rewritten
+                           search starts (a run from before this record: when it is
+                           resumed) and never rewritten
     summary.json           written when the run ends (the search's totals), completed by
                            the runner with what the run found (``findings``)
     run.lock               locked (``fcntl.flock``) by the one process that writes the run,

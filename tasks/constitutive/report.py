@@ -69,14 +69,24 @@ def motion_section(view: ReportView) -> Section:
         return Section(title, [Text(f"Skipped: {why}.")])
     view.say("drawing the free run")
     png, gif = plot_motion(view.task, best.id, free, view.folder)
-    return Section(title, [
+    blocks = [
         Text(f"Particle positions (x-y projection) of the observation and of {best.id} with "
              "its fitted parameters, simulated from the initial state without teacher "
              "forcing (the fit restarts every segment from the observed state; this does "
              "not)."),
         Image(png.name, "observation vs the best law, free run"),
         Image(gif.name, "animation"),
-    ])  # fmt: skip
+    ]  # fmt: skip
+    held_out = view.assessment.held_out
+    if held_out is not None and held_out.positions is not None:
+        view.say("drawing the free run on the held-out scene")
+        png, gif = plot_motion(view.task, best.id, held_out, view.folder, "motion-held-out")
+        blocks += [
+            Text(f"The same on the held-out scene, which {best.id} was never fitted to."),
+            Image(png.name, "held-out scene vs the best law, free run"),
+            Image(gif.name, "animation, held-out scene"),
+        ]
+    return Section(title, blocks)
 
 
 def _figure(width: float, height: float):
@@ -105,9 +115,11 @@ def _panel(axes, points: np.ndarray, limits, title: str, colour: str) -> None:
     axes.set_ylabel("y (m)")
 
 
-def plot_motion(task: str, best: str, free: FreeRun, folder: Path) -> tuple[Path, Path]:
+def plot_motion(
+    task: str, best: str, free: FreeRun, folder: Path, stem: str = "motion"
+) -> tuple[Path, Path]:
     """The observation above, the best law's (``best``, its id) free run below, at a few steps
-    (PNG); every kept frame of both as a GIF."""
+    (``stem``.png); every kept frame of both as a GIF (``stem``.gif)."""
     from matplotlib.animation import PillowWriter
 
     steps, truth, simulated = free.frames, free.observed, free.positions
@@ -119,15 +131,16 @@ def plot_motion(task: str, best: str, free: FreeRun, folder: Path) -> tuple[Path
         step = steps[frame]
         _panel(grid[0, column], truth[frame], limits, f"observed, step {step}", "#264653")
         _panel(grid[1, column], simulated[frame], limits, f"{best}, step {step}", "#e76f51")
-    figure.suptitle(f"{task}: observed motion vs the best law's free run (x-y projection)")
-    png = folder / "motion.png"
+    figure.suptitle(f"{task}, {free.scene}: observed motion vs the best law's free run "
+                    "(x-y projection)")  # fmt: skip
+    png = folder / f"{stem}.png"
     figure.tight_layout()
     figure.savefig(png, dpi=DPI)
 
     animation = _figure(8.0, 4.2)
     left, right = animation.subplots(1, 2)
     writer = PillowWriter(fps=GIF_FPS)
-    gif = folder / "motion.gif"
+    gif = folder / f"{stem}.gif"
     with writer.saving(animation, str(gif), dpi=100):
         for frame, step in enumerate(steps):
             _panel(left, truth[frame], limits, f"observed, step {step}", "#264653")

@@ -259,6 +259,8 @@ def test_report_of_a_real_search_states_the_run_s_numbers(tmp_path):
     assert png_size(folder / "motion.png") == (round(2.8 * MOTION_FRAMES * DPI), 6 * DPI)
     assert png_size(folder / "zigzag.png") == (9 * DPI, round(4.2 * DPI))
     assert (folder / "motion.gif").read_bytes()[:6] == b"GIF89a"
+    assert png_size(folder / "motion-held-out.png") == png_size(folder / "motion.png")
+    assert (folder / "motion-held-out.gif").read_bytes()[:6] == b"GIF89a"
 
 
 def test_derived_values_are_read_from_the_captured_graph():

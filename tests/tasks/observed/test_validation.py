@@ -89,7 +89,10 @@ def test_the_best_law_is_judged_on_the_validation_file(observed_pair, tmp_path: 
     view = ReportView("observed", _Best(), [], bad, tmp_path, True)
     section = task.report_sections(view)[0]
     assert section.title.startswith("Free run")
-    assert (tmp_path / "motion.png").read_bytes()[:4] == b"\x89PNG"
+    drawn = [block.file for block in section.blocks if hasattr(block, "file")]
+    assert drawn == ["motion.png", "motion.gif", "motion-held-out.png", "motion-held-out.gif"]
+    for name in drawn:
+        assert (tmp_path / name).read_bytes()[:3] in (b"\x89PN", b"GIF")
 
 
 class _Best:
