@@ -108,3 +108,18 @@ def test_the_verdict_switches_on_the_threshold_in_every_scene():
     assert "0.4 % free-run error on the training scene (" in verdict(None, below)
     assert "does not" in verdict(below, None, Thresholds(reproduces=0.001))
     assert verdict(None, None) == ""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["plasticine", "granular", "fluid", "imaginary"])
+def test_the_true_return_mapping_generalizes_and_no_plasticity_does_not(name):
+    """The plastic tasks likewise: the true return mapping (bridges.laws.from_material) beside
+    the known elastic law follows the ball through its impact; no plasticity (the seed) does
+    not."""
+    from tasks.constitutive.law_capture import capture_law
+
+    spec = SPECS[name]
+    truth = held_out_error(spec, true_law(spec), {}, SHORT)
+    seed = held_out_error(spec, capture_law(spec.seed), {}, SHORT)
+    assert truth.final_error < 1e-5
+    assert seed.final_error > 0.02 and seed.final_error > 1e3 * truth.final_error
