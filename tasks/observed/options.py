@@ -5,7 +5,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:
+    from taichi_mpm.sysid.observation import Observation
 
 #: taichi_mpm's elastic laws by their system-identification family names.
 ElasticFamily = Literal["stvk", "neohookean", "elastic", "corotated", "linear"]
@@ -59,7 +62,8 @@ class ObservedOptions:
         if self.validation is not None:
             object.__setattr__(self, "validation", self._checked_validation(observation))
 
-    def _checked_validation(self, observation) -> str:
+    def _checked_validation(self, observation: Observation) -> str:
+        """The validation file's absolute path, once it is checked against ``observation``."""
         from tasks.observed.data import read_observation, read_truth
 
         path = Path(self.validation).expanduser().resolve()
