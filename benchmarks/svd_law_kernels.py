@@ -115,7 +115,8 @@ def per_step(repeats: int) -> None:
     print(f"{os.cpu_count()} cores; load average before {os.getloadavg()}; 10,000 matrices, "
           f"float32, 1 thread, median of {repeats}")  # fmt: skip
     print(f"{'law':<16} {'compile s: svd-inputs':>21} {'sweeps':>7}   "
-          f"{'fwd+bwd ms: torch':>17} {'svd-inputs':>10} {'sweeps':>7}")  # fmt: skip
+          f"{'fwd+bwd ms: torch':>17} {'svd-inputs':>10} {'sweeps':>7} "
+          f"{'SVD alone':>9}")  # fmt: skip
     for name, (task, code) in laws().items():
         law = build_law(load_task(task).capture(code)["law"], torch.float32)
         compiled, seconds = {}, {}
@@ -125,16 +126,19 @@ def per_step(repeats: int) -> None:
             seconds[mode] = time.perf_counter() - started
             assert compiled[mode] is not None, (name, mode)
         times: dict[str, list[float]] = {"torch": [], **{mode: [] for mode in compiled}}
+        times["svd"] = []  # the SVD the svd-inputs step takes, with its reverse
         with linalg.stable_linalg():
             for _ in range(repeats):
                 for mode in times:
                     law.use_kernels(compiled.get(mode))
                     started = time.perf_counter()
-                    law(F).sum().backward()
+                    outs = linalg.svd(F, signed=False) if mode == "svd" else (law(F),)
+                    sum(out.sum() for out in outs).backward()
                     times[mode].append(time.perf_counter() - started)
         ms = {mode: statistics.median(values) * 1e3 for mode, values in times.items()}
         print(f"{name:<16} {seconds['svd-inputs']:>21.2f} {seconds['sweeps']:>7.2f}   "
-              f"{ms['torch']:>17.1f} {ms['svd-inputs']:>10.1f} {ms['sweeps']:>7.1f}")  # fmt: skip
+              f"{ms['torch']:>17.1f} {ms['svd-inputs']:>10.1f} {ms['sweeps']:>7.1f} "
+              f"{ms['svd']:>9.1f}")  # fmt: skip
     print(f"load average after {os.getloadavg()}")
 
 
