@@ -3,21 +3,21 @@
 For each law (the example von Mises and Drucker-Prager laws 2x off, on ``plasticine`` and
 ``granular``, and a von Mises law of the genetic-programming grammar on ``plasticine``) and each
 ``law_kernels`` option (``none``: torch; ``svd-inputs``: the svd3 kernel, then the law's
-compiled kernels reading U, S, Vh as inputs; with ``--sweeps`` also ``sweeps``: the SVD written
-out in the law's kernels as Jacobi sweeps, what ``all`` compiled before ``svd-inputs``), a fresh
-process runs ``evaluate`` as the fit worker does (float32, one thread): one untimed epoch in
-torch (the simulator's kernels and svd3's compile: a warm worker), then ``--epochs`` timed
-ones with the mode, whose law's kernels compile first (those of a new law are never cached, and
-Taichi would reuse a second compilation of the same law in one process). Runs alternate, mode
-by mode, law by law, for ``--rounds`` rounds; the table gives the medians over rounds of the
-compile seconds, the median epoch, and the peak resident memory of the process as its parent
-reads it (``wait4``), with the load average around the run.
+compiled kernels reading U, S, Vh as inputs; with ``--sweeps`` also ``all``: the SVD written
+out in the law's kernels as Jacobi sweeps), a fresh process runs ``evaluate`` as the fit
+worker does (float32, one thread): one untimed epoch in torch (the simulator's kernels and
+svd3's compile: a warm worker), then ``--epochs`` timed ones with the mode, whose law's
+kernels compile first (those of a new law are never cached, and Taichi would reuse a second
+compilation of the same law in one process). Runs alternate, mode by mode, law by law, for
+``--rounds`` rounds; the table gives the medians over rounds of the compile seconds, the
+median epoch, and the peak resident memory of the process as its parent reads it
+(``wait4``), with the load average around the run.
 
 ``--per-step`` measures instead, in one process (float32, one thread), each law's compile time
-both ways (``svd-inputs``, ``sweeps``) and the milliseconds of one step's law, forward and
-reverse, on the 10,000 deformation gradients of an epoch's batch (10 scene copies), the three
-ways interleaved, median of ``--repeats``: what an epoch's 1000 steps pay for the law,
-without the rest of the epoch's noise. Usage::
+both ways (``svd-inputs``, and ``all``'s sweeps) and the milliseconds of one step's law,
+forward and reverse, on the 10,000 deformation gradients of an epoch's batch (10 scene
+copies), the three ways and the SVD alone interleaved, median of ``--repeats``: what each of
+an epoch's 100 batched steps pays for the law, without the rest of the epoch's noise. Usage::
 
     python benchmarks/svd_law_kernels.py [--epochs 3] [--rounds 2] [--steps 1000] [--sweeps]
     python benchmarks/svd_law_kernels.py --per-step [--repeats 50]
@@ -80,15 +80,12 @@ def child(task: str, graph: Path, mode: str, epochs: int, steps: int) -> None:
         compiles.append((time.perf_counter() - started, compiled is not None))
         return compiled
 
-    def sweeps(law, F, svd=False, factored=False):
-        return timed(law, F, svd=True)
-
-    law_kernel.kernel_law = sweeps if mode == "sweeps" else timed
+    law_kernel.kernel_law = timed
     evaluator = load_task(task)
     data = json.loads(graph.read_text())
     warm = ConstitutiveOptions(steps=steps, law_kernels="none")
     evaluator.evaluate(data, EvaluationSettings(epochs=1, options=warm))
-    options = ConstitutiveOptions(steps=steps, law_kernels="all" if mode == "sweeps" else mode)
+    options = ConstitutiveOptions(steps=steps, law_kernels=mode)
     result = evaluator.evaluate(data, EvaluationSettings(epochs=epochs, options=options))
     assert result.valid, result.reason
     print(json.dumps({"compile_s": compiles[-1][0] if compiles else 0.0,
@@ -132,7 +129,7 @@ def per_step(repeats: int) -> None:
                 for mode in times:
                     law.use_kernels(compiled.get(mode))
                     started = time.perf_counter()
-                    outs = linalg.svd(F, signed=False) if mode == "svd" else (law(F),)
+                    outs = linalg.svd(F) if mode == "svd" else (law(F),)
                     sum(out.sum() for out in outs).backward()
                     times[mode].append(time.perf_counter() - started)
         ms = {mode: statistics.median(values) * 1e3 for mode, values in times.items()}
@@ -164,7 +161,7 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=3)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--steps", type=int, default=1000)
-    parser.add_argument("--sweeps", action="store_true", help="add the SVD as Jacobi sweeps")
+    parser.add_argument("--sweeps", action="store_true", help="add law_kernels=all")
     parser.add_argument("--per-step", action="store_true", help="a step's law alone")
     parser.add_argument("--repeats", type=int, default=50)
     parser.add_argument("--child", nargs=3, metavar=("TASK", "GRAPH", "MODE"))
@@ -178,7 +175,7 @@ def main() -> None:
         return
     from sga_agent.registry import load_task
 
-    modes = (*MODES, "sweeps") if args.sweeps else MODES
+    modes = (*MODES, "all") if args.sweeps else MODES
     rows: dict[tuple[str, str], list[dict]] = {}
     load = os.getloadavg()
     with tempfile.TemporaryDirectory() as folder:

@@ -546,8 +546,8 @@ class CompiledLaw:
     outputs : sequence of Scalar or float
         The particle's outputs, one per column of the result.
     svd_inputs : bool
-        Whether the program's inputs are a 3x3 matrix's 9 entries and then its SVD's 21 values
-        (U, S, Vh: :data:`SVD_VALUES`), which :func:`apply_law` computes by
+        Whether the program's inputs are a 3x3 matrix's 9 entries and then its signed SVD's 21
+        values (U, S, Vh: :data:`SVD_VALUES`), which :func:`apply_law` computes by
         :func:`bridges.linalg.svd` (the batched svd3 kernel and its reverse where they apply):
         the law's kernels then hold no Jacobi sweeps, and compile in a fraction of the time.
     """
@@ -692,11 +692,12 @@ def apply_law(
 ) -> torch.Tensor:
     """``law`` on (B, 3, 3) ``F`` with ``parameters`` (the program's, in its order), as a
     differentiable torch operation: its reverse is ``law``'s reverse kernel. A law of F and its
-    SVD (``law.svd_inputs``) gets the SVD from :func:`bridges.linalg.svd` (torch's convention,
-    S >= 0), whose own reverse then takes the law's gradients of U, S and Vh to F."""
+    SVD (``law.svd_inputs``) gets the signed SVD from :func:`bridges.linalg.svd` (rotations, the
+    sign of det F on S[2]; the program turns it to the convention it needs), whose own reverse
+    then takes the law's gradients of U, S and Vh to F."""
     if not law.svd_inputs:
         return _LawFunction.apply(law, F.shape, 1, F, *parameters)
-    U, S, Vh = linalg.svd(F, signed=False)
+    U, S, Vh = linalg.svd(F)  # signed: in float32 three views of svd3's output, no sign flips
     return _LawFunction.apply(law, F.shape, 4, F, U, S, Vh, *parameters)
 
 

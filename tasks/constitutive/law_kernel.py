@@ -412,9 +412,15 @@ _SVD = "aten._linalg_svd.default"
 
 
 def _factors(inputs: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """U (1, 3, 3), S (1, 3), Vh (1, 3, 3) read from the program's 21 inputs ``inputs``."""
-    return (_array(inputs[:9]).reshape(1, 3, 3), _array(inputs[9:12]).reshape(1, 3),
-            _array(inputs[12:]).reshape(1, 3, 3))  # fmt: skip
+    """U (1, 3, 3), S (1, 3), Vh (1, 3, 3) in torch's convention (S >= 0) from the program's 21
+    inputs ``inputs``: the signed SVD (rotations, S[2] of det F's sign) that
+    :func:`bridges.scalar_law.apply_law` computes, its last column of U and last singular value
+    negated where S[2] < 0, as :func:`bridges.linalg.svd` does for ``signed=False``."""
+    U, S = _array(inputs[:9]).reshape(1, 3, 3), _array(inputs[9:12]).reshape(1, 3)
+    flip = sl.apply("lt", S[0, 2], 0.0)
+    U[0, :, 2] = [sl.select(flip, -u, u) for u in U[0, :, 2]]
+    S[0, 2] = abs(S[0, 2])
+    return U, S, _array(inputs[12:]).reshape(1, 3, 3)
 
 
 def _svd_rule(A, full_matrices=True, compute_uv=True, driver=None, *, F: np.ndarray,

@@ -21,10 +21,11 @@ class ConstitutiveOptions:
     torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD;
     ``svd-inputs`` also those whose SVDs are of F itself (the genetic-programming laws, the
     example plastic laws), computed once a step by the batched svd3 kernel and read by the
-    law's kernels as inputs (compiled in under half a second here, but a step measured no
-    faster than torch's: ``benchmarks/svd_law_kernels.py``, hence not the default); ``all``
-    also those with other SVDs, written out in the kernels as Jacobi sweeps (which cost
-    seconds to compile); ``none`` keeps every law in torch."""
+    law's kernels as inputs (compiled in a few tenths of a second, but a step measured about
+    as fast as torch's: ``benchmarks/svd_law_kernels.py``, hence not the default); ``all``
+    those with any SVD, written out in the kernels as Jacobi sweeps (a step measured about
+    twice as fast as torch's, but they take one to four seconds to compile); ``none`` keeps
+    every law in torch."""
 
     steps: int | None = None
     optimizer: Literal["adam", "lbfgs"] | None = None
