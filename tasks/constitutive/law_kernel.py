@@ -102,9 +102,9 @@ def kernel_law(law: GraphLaw, F: torch.Tensor, svd: bool = False,
                factored: bool = False) -> sl.CompiledLaw | None:  # fmt: skip
     """The compiled kernels of ``law`` if they compute what its torch graph computes on the
     deformation gradients ``F`` (N, 3, 3) and their neighbourhood, else None. A law with an SVD
-    of F is compiled only with ``factored`` (the SVD's factors as the kernels' inputs), one
-    with other SVDs only with ``svd`` too (Jacobi sweeps in its kernels, which take seconds to
-    compile: see the task option ``law_kernels``)."""
+    is compiled only with ``factored`` (an SVD of F itself: its factors as the kernels' inputs)
+    or ``svd`` (any other SVD, and with ``factored`` false every SVD, as Jacobi sweeps in the
+    kernels, which take seconds to compile: see the task option ``law_kernels``)."""
     try:
         program, outputs = translate(law.graph, F.dtype, svd, factored)
         svd_inputs = len(program.inputs) == 9 + sl.SVD_VALUES
