@@ -36,6 +36,7 @@ from typing import Any
 import taichi as ti
 import torch
 
+from bridges import linalg
 from bridges.step import torch_dtype
 from taichi_mpm import _compat
 from taichi_mpm.kernels.jacobi_svd import jacobi_svd
@@ -544,10 +545,19 @@ class CompiledLaw:
         The law for one particle.
     outputs : sequence of Scalar or float
         The particle's outputs, one per column of the result.
+    svd_inputs : bool
+        Whether the program's inputs are a 3x3 matrix's 9 entries and then its signed SVD's 21
+        values (U, S, Vh: :data:`SVD_VALUES`), which :func:`apply_law` computes by
+        :func:`bridges.linalg.svd` (the batched svd3 kernel and its reverse where they apply):
+        the law's kernels then hold no Jacobi sweeps, and compile in a fraction of the time.
     """
 
-    def __init__(self, program: Program, outputs: Sequence[Scalar | float]) -> None:
+    def __init__(self, program: Program, outputs: Sequence[Scalar | float],
+                 svd_inputs: bool = False) -> None:  # fmt: skip
         self.inputs, self.parameters = len(program.inputs), len(program.parameters)
+        if svd_inputs and self.inputs != 9 + SVD_VALUES:
+            raise ValueError(f"a law of a matrix and its SVD has 30 inputs, not {self.inputs}")
+        self.svd_inputs = svd_inputs
         self.outputs = len(outputs)
         svds = [i for i in sorted(_needed(program, outputs)) if program.nodes[i][0] == "svd"]
         saved = [program.op("part", Scalar(program, i), k) for i in svds for k in range(SVD_VALUES)]
@@ -681,41 +691,62 @@ def apply_law(
     F: torch.Tensor, law: CompiledLaw, parameters: Sequence[torch.Tensor]
 ) -> torch.Tensor:
     """``law`` on (B, 3, 3) ``F`` with ``parameters`` (the program's, in its order), as a
-    differentiable torch operation: its reverse is ``law``'s reverse kernel."""
-    return _LawFunction.apply(F, law, *parameters)
+    differentiable torch operation: its reverse is ``law``'s reverse kernel. A law of F and its
+    SVD (``law.svd_inputs``) gets the signed SVD from :func:`bridges.linalg.svd` (rotations, the
+    sign of det F on S[2]; the program turns it to the convention it needs), whose own reverse
+    then takes the law's gradients of U, S and Vh to F."""
+    if not law.svd_inputs:
+        return _LawFunction.apply(law, F.shape, 1, F, *parameters)
+    U, S, Vh = linalg.svd(F)  # signed: in float32 three views of svd3's output, no sign flips
+    return _LawFunction.apply(law, F.shape, 4, F, U, S, Vh, *parameters)
 
 
-def _rows(F: torch.Tensor, law: CompiledLaw) -> torch.Tensor:
-    """The law's (N, inputs) rows of ``F``, contiguous, as its kernels read them."""
-    return F.detach().reshape(-1, law.inputs).contiguous()
+def _rows(pieces: Sequence[torch.Tensor], law: CompiledLaw) -> torch.Tensor:
+    """The law's (N, inputs) rows of its input tensors, contiguous, as its kernels read them."""
+    count = pieces[0].shape[:-2].numel()
+    if len(pieces) == 1:
+        return pieces[0].detach().reshape(count, law.inputs).contiguous()
+    return torch.cat([p.detach().reshape(count, -1) for p in pieces], dim=1)
 
 
 class _LawFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, F, law: CompiledLaw, *parameters):
-        rows = _rows(F, law)
+    def forward(ctx, law: CompiledLaw, shape: torch.Size, count: int, *tensors):
+        pieces, parameters = tensors[:count], tensors[count:]
+        rows = _rows(pieces, law)
         flat = flat_parameters(parameters, rows)
-        ctx.law, ctx.shape = law, F.shape
+        ctx.law, ctx.shape, ctx.count = law, shape, count
         out = law.forward(rows, flat)
-        # F itself, not its rows: F is a view of the step's output or the step's own input,
-        # which the graph keeps anyway, while the rows are a copy (the reverse copies again)
-        ctx.save_for_backward(F.detach(), flat, out[:, law.outputs :], *parameters)
-        return out[:, : law.outputs].reshape(F.shape)
+        # the input tensors, not their rows: F is a view of the step's output or the step's own
+        # input, and an SVD's factors are what its reverse keeps, which the graph keeps anyway,
+        # while the rows are a copy (the reverse copies again)
+        ctx.save_for_backward(*[p.detach() for p in pieces], flat, out[:, law.outputs :],
+                              *parameters)  # fmt: skip
+        return out[:, : law.outputs].reshape(shape)
 
     @staticmethod
     def backward(ctx, grad):
-        F, flat, saved, *parameters = ctx.saved_tensors
+        saved_tensors = ctx.saved_tensors
+        pieces, (flat, saved) = saved_tensors[: ctx.count], saved_tensors[ctx.count : ctx.count + 2]
+        parameters = saved_tensors[ctx.count + 2 :]
         law: CompiledLaw = ctx.law
-        rows = _rows(F, law)
+        rows = _rows(pieces, law)
         grad_rows, grad_flat = law.backward(rows, flat, saved,
                                             grad.reshape(rows.shape[0], -1))  # fmt: skip
-        pieces = split_parameters(grad_flat, parameters)
+        batch = len(ctx.shape) - 2
+        widths = [p.shape[batch:].numel() for p in pieces]
+        grad_pieces = [g.reshape(p.shape) for g, p in
+                       zip(grad_rows.split(widths, dim=1), pieces, strict=True)]  # fmt: skip
+        pieces_grads = split_parameters(grad_flat, parameters)
         unused = split_parameters(torch.tensor(law.constant_zero), parameters)
+        first = 3 + ctx.count
         return (
-            grad_rows.reshape(ctx.shape),
             None,
+            None,
+            None,
+            *grad_pieces,
             *[
-                None if bool(zero.all()) or not ctx.needs_input_grad[2 + index] else piece
-                for index, (piece, zero) in enumerate(zip(pieces, unused, strict=True))
+                None if bool(zero.all()) or not ctx.needs_input_grad[first + index] else piece
+                for index, (piece, zero) in enumerate(zip(pieces_grads, unused, strict=True))
             ],
         )

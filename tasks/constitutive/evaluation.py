@@ -164,7 +164,8 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     observed = ground_truth(spec, options.steps)
     if options.law_kernels != "none":
         F = observed_deformations(observed, dtype)
-        law.use_kernels(law_kernel.kernel_law(law, F, svd=options.law_kernels == "all"))
+        svd, factored = options.law_kernels == "all", options.law_kernels == "svd-inputs"
+        law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
     if spec.searched == "elastic":
         rollout = Rollout(scene, torch_laws.NoPlasticity(), law)

@@ -39,13 +39,23 @@ class Untranslatable(ValueError):
     """The graph uses something :func:`translate` does not write out."""
 
 
-def translate(graph: LawGraph, dtype: torch.dtype, svd: bool = True) -> tuple[sl.Program, list]:
+def translate(graph: LawGraph, dtype: torch.dtype, svd: bool = True,
+              factored: bool = False) -> tuple[sl.Program, list]:  # fmt: skip
     """(program, its 9 outputs): the law for one particle, parameters in the graph's order,
-    for the floats of ``dtype`` (an SVD's gradient clamp depends on them); with ``svd``
-    false, a graph with an SVD is :class:`Untranslatable`."""
+    for the floats of ``dtype`` (an SVD's gradient clamp depends on them).
+
+    With ``factored``, the SVDs of the law's input F itself read U, S and Vh from 21 more
+    inputs of the program (after F's 9: :class:`bridges.scalar_law.CompiledLaw`'s
+    ``svd_inputs``, computed outside the law's kernels); other SVDs are written out as Jacobi
+    sweeps with ``svd``, and without it are :class:`Untranslatable`.
+    """
     sizes = [math.prod(t.shape) for t in graph.parameters.values()]
-    program = sl.Program(9, sum(sizes))
-    values: dict[str, list] = {"input": [_array(program.inputs).reshape(1, 3, 3)]}
+    of_input = factored and any(op == _SVD and args and args[0] == {"input": 0}
+                                for op, args, _ in graph.nodes)  # fmt: skip
+    program = sl.Program(9 + sl.SVD_VALUES * of_input, sum(sizes))
+    F = _array(program.inputs[:9]).reshape(1, 3, 3)
+    factors = _factors(program.inputs[9:]) if of_input else None
+    values: dict[str, list] = {"input": [F]}
     start, params = 0, []
     for size, tensor in zip(sizes, graph.parameters.values(), strict=True):
         params.append(_array(program.parameters[start : start + size]).reshape(tensor.shape))
@@ -67,8 +77,8 @@ def translate(graph: LawGraph, dtype: torch.dtype, svd: bool = True) -> tuple[sl
             return None  # dtype, device, layout, memory format: floats only here
         return value
 
-    rules = RULES | ({"aten._linalg_svd.default": partial(_svd, tolerance=_svd_tolerance(dtype))}
-                     if svd else {})  # fmt: skip
+    inline = partial(_svd, tolerance=_svd_tolerance(dtype)) if svd else None
+    rules = RULES | {_SVD: partial(_svd_rule, F=F, factors=factors, inline=inline)}
     for op, args, kwargs in graph.nodes:
         rule = rules.get(op)
         if rule is None:
@@ -88,14 +98,17 @@ def translate(graph: LawGraph, dtype: torch.dtype, svd: bool = True) -> tuple[sl
     return program, list(out.reshape(-1))
 
 
-def kernel_law(law: GraphLaw, F: torch.Tensor, svd: bool = False) -> sl.CompiledLaw | None:
+def kernel_law(law: GraphLaw, F: torch.Tensor, svd: bool = False,
+               factored: bool = False) -> sl.CompiledLaw | None:  # fmt: skip
     """The compiled kernels of ``law`` if they compute what its torch graph computes on the
-    deformation gradients ``F`` (N, 3, 3) and their neighbourhood, else None; a law with an SVD
-    only with ``svd`` (its kernels take longer to compile: see the task option
-    ``law_kernels``)."""
+    deformation gradients ``F`` (N, 3, 3) and their neighbourhood, else None. A law with an SVD
+    is compiled only with ``factored`` (an SVD of F itself: its factors as the kernels' inputs)
+    or ``svd`` (any other SVD, and with ``factored`` false every SVD, as Jacobi sweeps in the
+    kernels, which take seconds to compile: see the task option ``law_kernels``)."""
     try:
-        program, outputs = translate(law.graph, F.dtype, svd)
-        compiled = sl.CompiledLaw(program, outputs)
+        program, outputs = translate(law.graph, F.dtype, svd, factored)
+        svd_inputs = len(program.inputs) == 9 + sl.SVD_VALUES
+        compiled = sl.CompiledLaw(program, outputs, svd_inputs)
     except (Untranslatable, sl.ProgramTooLarge):
         return None
     return compiled if _agrees(law, compiled, F) else None
@@ -127,15 +140,17 @@ def _agrees(law: GraphLaw, compiled: sl.CompiledLaw, F: torch.Tensor) -> bool:
     tolerance = TOLERANCE.get(F.dtype, 2e-4)
     if not all(_close(other, expected, tolerance) for other in (split, flipped)):
         return False
-    flat = sl.flat_parameters(parameters, rows)
-    out = compiled.forward(rows.reshape(-1, 9), flat)
-    actual = out[:, :9].reshape(rows.shape)
-    dF, dflat = compiled.backward(rows.reshape(-1, 9), flat, out[:, 9:], seed.reshape(-1, 9))
-    mine = [dF.reshape(rows.shape), *sl.split_parameters(dflat, parameters)]
-    for theirs, ours in zip(grads, mine, strict=True):
-        if not _close(ours, torch.zeros_like(ours) if theirs is None else theirs, tolerance):
+    F_kernels = rows.clone().requires_grad_(True)
+    with torch.enable_grad():
+        actual = sl.apply_law(F_kernels, compiled, parameters)
+        mine = torch.autograd.grad((actual * seed).sum(), [F_kernels, *parameters],
+                                   allow_unused=True)  # fmt: skip
+    for theirs, ours, like in zip(grads, mine, [rows, *parameters], strict=True):
+        zero = torch.zeros_like(like)
+        if not _close(zero if ours is None else ours, zero if theirs is None else theirs,
+                      tolerance):  # fmt: skip
             return False
-    return _close(actual, expected, tolerance)
+    return _close(actual.detach(), expected, tolerance)
 
 
 def _close(actual: torch.Tensor, expected: torch.Tensor, tolerance: float) -> bool:
@@ -393,9 +408,37 @@ def _svd_tolerance(dtype: torch.dtype) -> float:
     return torch.finfo(dtype).eps ** 0.5
 
 
-def _svd(A, full_matrices=True, compute_uv=True, driver=None, *, tolerance: float):
+_SVD = "aten._linalg_svd.default"
+
+
+def _factors(inputs: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """U (1, 3, 3), S (1, 3), Vh (1, 3, 3) in torch's convention (S >= 0) from the program's 21
+    inputs ``inputs``: the signed SVD (rotations, S[2] of det F's sign) that
+    :func:`bridges.scalar_law.apply_law` computes, its last column of U and last singular value
+    negated where S[2] < 0, as :func:`bridges.linalg.svd` does for ``signed=False``."""
+    U, S = _array(inputs[:9]).reshape(1, 3, 3), _array(inputs[9:12]).reshape(1, 3)
+    flip = sl.apply("lt", S[0, 2], 0.0)
+    U[0, :, 2] = [sl.select(flip, -u, u) for u in U[0, :, 2]]
+    S[0, 2] = abs(S[0, 2])
+    return U, S, _array(inputs[12:]).reshape(1, 3, 3)
+
+
+def _svd_rule(A, full_matrices=True, compute_uv=True, driver=None, *, F: np.ndarray,
+              factors: tuple | None, inline: Callable | None):  # fmt: skip
+    """An SVD: of the law's input ``F`` itself the ``factors`` where given, else the
+    ``inline`` Jacobi sweeps where given."""
     A = _tensor(A)
-    if A.shape[-2:] != (3, 3) or not compute_uv or driver is not None:
+    if not compute_uv or driver is not None:
+        raise NotImplementedError("an SVD without U and Vh, or with a driver")
+    if factors is not None and A is F:
+        return factors
+    if inline is None:
+        raise NotImplementedError("an SVD of something other than F")
+    return inline(A)
+
+
+def _svd(A, *, tolerance: float):
+    if A.shape[-2:] != (3, 3):
         raise NotImplementedError("an SVD other than of 3x3 matrices with U and Vh")
     U, S, Vh = _allocated(A.shape), _allocated(A.shape[:-1]), _allocated(A.shape)
     for index in np.ndindex(A.shape[:-2]):

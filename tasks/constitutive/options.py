@@ -18,15 +18,20 @@ class ConstitutiveOptions:
     with the plastic ones).
     ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
     and one in reverse a step, where the translation covers their operations and agrees with
-    torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD,
-    ``all`` those with one too (compiling the SVD costs a second or more per law, which a
-    plastic law's epochs did not win back here), ``none`` keeps every law in torch."""
+    torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD;
+    ``svd-inputs`` also those whose SVDs are of F itself (the genetic-programming laws, the
+    example plastic laws), computed once a step by the batched svd3 kernel and read by the
+    law's kernels as inputs (compiled in a few tenths of a second, but a step measured about
+    as fast as torch's: ``benchmarks/svd_law_kernels.py``, hence not the default); ``all``
+    those with any SVD, written out in the kernels as Jacobi sweeps (a step measured about
+    twice as fast as torch's, but they take one to four seconds to compile); ``none`` keeps
+    every law in torch."""
 
     steps: int | None = None
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     graph_memory_mb: float = 250.0
-    law_kernels: Literal["no-svd", "all", "none"] = "no-svd"
+    law_kernels: Literal["no-svd", "svd-inputs", "all", "none"] = "no-svd"
 
     def __post_init__(self) -> None:
         if self.steps is not None and self.steps < 1:

@@ -1,12 +1,14 @@
 """A captured law compiled into Taichi kernels computes what its torch graph computes.
 
 The laws are captured here, in the test process (known code). In float64 the kernels must give
-the torch graph's stress, dL/dF and parameter gradients to round-off; a law whose operations
-have no translation (an SVD) or whose torch graph mixes particles stays in torch; and a fit
-scores a law the same with and without the kernels.
+the torch graph's stress, dL/dF and parameter gradients to round-off (a law whose SVDs are of
+F itself, with the SVD's factors as the kernels' inputs, too); a law whose operations have no
+translation (an SVD unless asked for) or whose torch graph mixes particles stays in torch; and
+a fit scores a law the same with and without the kernels.
 """
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +20,8 @@ from bridges import scalar_law
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
 from tasks.constitutive import law_kernel, law_ops
+from tasks.constitutive.gp.codegen import law_code
+from tasks.constitutive.gp.genome import Genome, Node, Param, Term
 from tasks.constitutive.law_capture import capture_law
 from tasks.constitutive.law_graph import build_law
 from tasks.constitutive.options import ConstitutiveOptions
@@ -71,6 +75,26 @@ class Physics(nn.Module):
 """
 
 
+def _gp_law(rotation: bool = True) -> str:
+    """A law of the genetic-programming grammar using its SVD's U, sigma and Vh: a von Mises
+    return mapping rebuilt from the corrected strain (the yield strain of ``plasticine``'s
+    ground truth), and with ``rotation`` a shear towards the rotation of F, scaled by log J
+    (the determinant of F), which makes the scene unstable."""
+    eps = Node("eps")
+    threshold = Node("const", (Param("log", math.log(3e4 / (2 * 1e6 / 2.4))),))
+    mapped = Node("add", (Node("vol", (eps,)), Node("shrink", (Node("dev", (eps,)), threshold))))
+    terms = (Term(Param("sigmoid", 1.0), Node("from_strain", (mapped,))),)
+    if rotation:
+        towards = Node("smul", (Node("log_J"), Node("sub", (Node("R"), Node("F")))))
+        terms += (Term(Param("sigmoid", -2.0), towards),)
+    return law_code(Genome("plastic", terms))
+
+
+#: Laws whose every SVD is of F itself: compiled with its factors as the kernels' inputs.
+SVD_OF_F = {"gp": _gp_law(), "von_mises": (EXAMPLES / "von_mises.py").read_text(),
+            "drucker_prager": (EXAMPLES / "drucker_prager.py").read_text()}  # fmt: skip
+
+
 def _deformations(count: int = 400) -> torch.Tensor:
     generator = torch.Generator().manual_seed(7)
     F = torch.eye(3, dtype=torch.float64) + 0.2 * torch.randn(
@@ -84,13 +108,8 @@ def _law(code: str):
     return build_law(capture_law(code), torch.float64)
 
 
-@pytest.mark.parametrize("code", [BROAD, (EXAMPLES / "neo_hookean.py").read_text(),
-                                  (EXAMPLES / "fluid.py").read_text()],
-                         ids=["broad", "neo_hookean", "fluid"])  # fmt: skip
-def test_compiled_laws_equal_their_torch_graphs(code):
-    law = _law(code)
-    kernels = law_kernel.kernel_law(law, _deformations())
-    assert kernels is not None
+def _assert_kernels_match_torch(law, kernels: scalar_law.CompiledLaw) -> None:
+    """The law's stress, dL/dF and parameter gradients with ``kernels`` are its torch graph's."""
     F = _deformations(count=300).requires_grad_(True)
     weights = torch.randn(F.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(3))
     expected = law.torch_forward(F)
@@ -101,6 +120,51 @@ def test_compiled_laws_equal_their_torch_graphs(code):
     torch.testing.assert_close(actual, expected, rtol=1e-10, atol=1e-10)
     for mine, theirs in zip(actual_grads, expected_grads, strict=True):
         torch.testing.assert_close(mine, theirs, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("code", [BROAD, (EXAMPLES / "neo_hookean.py").read_text(),
+                                  (EXAMPLES / "fluid.py").read_text()],
+                         ids=["broad", "neo_hookean", "fluid"])  # fmt: skip
+def test_compiled_laws_equal_their_torch_graphs(code):
+    law = _law(code)
+    kernels = law_kernel.kernel_law(law, _deformations())
+    assert kernels is not None
+    _assert_kernels_match_torch(law, kernels)
+
+
+@pytest.mark.parametrize("name", SVD_OF_F)
+def test_laws_with_an_svd_of_F_compile_with_its_factors_as_inputs(name):
+    """No Jacobi sweeps in the kernels: U, S, Vh come from ``bridges.linalg.svd`` (the same
+    SVD as the torch graph's), so in float64 the stress and every gradient match torch's."""
+    law = _law(SVD_OF_F[name])
+    program, _ = law_kernel.translate(law.graph, torch.float64, svd=False, factored=True)
+    assert len(program.inputs) == 30 and all(op != "svd" for op, _ in program.nodes)
+    kernels = law_kernel.kernel_law(law, _deformations(), factored=True)
+    assert kernels is not None and kernels.svd_inputs
+    _assert_kernels_match_torch(law, kernels)
+
+
+@pytest.mark.parametrize("name", SVD_OF_F)
+def test_a_law_of_F_and_its_svd_passes_finite_differences(name):
+    """Through the law's reverse kernel and then the SVD's reverse, to F and the parameters."""
+    law = _law(SVD_OF_F[name])
+    kernels = law_kernel.kernel_law(law, _deformations(), factored=True)
+    assert kernels is not None
+    F = _deformations(count=5).requires_grad_(True)
+    parameters = [p.detach().clone().requires_grad_(True) for p in law.graph_parameters]
+    assert torch.autograd.gradcheck(lambda F, *p: scalar_law.apply_law(F, kernels, p),
+                                    (F, *parameters), eps=1e-6, atol=1e-6)  # fmt: skip
+
+
+def test_a_law_with_another_svd_stays_in_torch_unless_sweeps_are_asked_for():
+    code = (EXAMPLES / "von_mises.py").read_text()
+    code = code.replace("torch.linalg.svd(F)", "torch.linalg.svd(F.transpose(1, 2))")
+    law = _law(code)
+    with pytest.raises(law_kernel.Untranslatable, match="other than F"):
+        law_kernel.translate(law.graph, torch.float64, svd=False, factored=True)
+    assert law_kernel.kernel_law(law, _deformations(), factored=True) is None
+    program, _ = law_kernel.translate(law.graph, torch.float64, svd=True, factored=True)
+    assert len(program.inputs) == 9 and any(op == "svd" for op, _ in program.nodes)
 
 
 def test_every_overload_of_the_operations_table_may_appear_in_a_graph():
@@ -132,7 +196,8 @@ def test_a_law_of_large_tensors_per_particle_is_not_translated():
 
 
 #: In float32, where the torch graph's SVD and the kernels' are the same Jacobi sweeps, every
-#: example law compiles, agrees, and a fit's first loss and gradient match.
+#: example law compiles both ways (the sweeps in its kernels, or svd3's factors as their
+#: inputs), agrees, and a fit's first loss and gradient match with the factors as inputs.
 FLOAT32_CHECK = r"""
 import json, sys, torch
 import taichi_mpm as tm
@@ -141,6 +206,8 @@ from bridges import scalar_law
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
 from tasks.constitutive import law_kernel, law_ops
+from tasks.constitutive.gp.codegen import law_code
+from tasks.constitutive.gp.genome import Genome, Node, Param, Term
 from tasks.constitutive.law_graph import build_law
 from tasks.constitutive.options import ConstitutiveOptions
 report = {}
@@ -150,10 +217,11 @@ for name, (task, path) in json.loads(sys.argv[1]).items():
     data = evaluator.capture(code)
     F = torch.eye(3) + 0.1 * torch.randn(300, 3, 3, generator=torch.Generator().manual_seed(0))
     law = build_law(data["law"], torch.float32)
-    compiled = law_kernel.kernel_law(law, F, svd=True) is not None
+    compiled = law_kernel.kernel_law(law, F, svd=True) is not None  # Jacobi sweeps inside
+    factored = law_kernel.kernel_law(law, F, factored=True) is not None  # svd3's factors
     losses = [evaluator.evaluate(data, EvaluationSettings(epochs=1, options=ConstitutiveOptions(
-        steps=100, law_kernels=kernels))).curves["loss"] for kernels in ("all", "none")]
-    report[name] = {"compiled": compiled, "losses": losses}
+        steps=100, law_kernels=kernels))).curves["loss"] for kernels in ("svd-inputs", "none")]
+    report[name] = {"compiled": compiled, "factored": factored, "losses": losses}
 print(json.dumps(report))
 """
 
@@ -167,7 +235,7 @@ def test_in_float32_laws_with_svds_compile_and_fit_as_in_torch():
     assert out.returncode == 0, out.stderr[-3000:]
     report = json.loads(out.stdout.strip().splitlines()[-1])
     for name, row in report.items():
-        assert row["compiled"], name
+        assert row["compiled"] and row["factored"], name
         (first, second), (torch_first, torch_second) = row["losses"]
         if torch_first < 1e-9:  # float32 round-off: the example mixture fits its task to 1e-12
             continue
@@ -183,13 +251,17 @@ def test_a_law_that_mixes_particles_is_not_compiled_into_one_that_does_not():
     assert law_kernel.kernel_law(law, _deformations()) is None
 
 
-def test_a_fit_scores_a_law_the_same_with_and_without_kernels():
-    task = load_task("elastic")
-    data = task.capture((EXAMPLES / "neo_hookean.py").read_text())
+@pytest.mark.parametrize(("task_name", "code", "kernels"), [
+    ("elastic", (EXAMPLES / "neo_hookean.py").read_text(), "no-svd"),
+    ("plasticine", _gp_law(rotation=False), "svd-inputs"),  # the SVD's factors as inputs
+], ids=["neo_hookean", "gp_von_mises"])  # fmt: skip
+def test_a_fit_scores_a_law_the_same_with_and_without_kernels(task_name, code, kernels):
+    task = load_task(task_name)
+    data = task.capture(code)
     results = [
         task.evaluate(data, EvaluationSettings(
-            epochs=2, options=ConstitutiveOptions(steps=100, law_kernels=kernels)))
-        for kernels in ("no-svd", "none")
+            epochs=2, options=ConstitutiveOptions(steps=100, law_kernels=option)))
+        for option in (kernels, "none")
     ]  # fmt: skip
     assert all(result.valid for result in results)
     compiled, in_torch = results
