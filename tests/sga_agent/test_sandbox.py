@@ -281,6 +281,21 @@ def test_pool_keeps_its_helpers_warm():
     assert second.extras["capture_seconds"] < first.extras["capture_seconds"]
 
 
+def test_captured_data_is_fitted_again_at_another_fidelity_without_a_capture():
+    """A multi-fidelity search's promoted candidate: its screen's captured data, fitted in
+    full by the same warm fit worker; the solution does not run again."""
+    task = "tests.sga_agent.doubles:WarmingTask"  # reports its fit worker's process id
+    with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        screen = pool.submit(task, "loss = 1.0\n", EvaluationSettings(fidelity=0.2)).result()
+        captured = screen.artifacts["captured"]
+        full = pool.submit(task, "raise SystemExit('ran again')\n", SETTINGS,
+                           captured=captured).result()  # fmt: skip
+    assert (screen.extras["settings"]["fidelity"], full.extras["settings"]["fidelity"]) == (0.2, 1)
+    assert full.valid and full.loss == 1.0  # the screen's data, not the text's capture
+    assert full.extras["fit_pid"] == screen.extras["fit_pid"]
+    assert full.extras["capture_seconds"] < 0.05
+
+
 def test_a_pool_starts_its_idle_slots_once_its_first_capture_has_ended():
     with SandboxPool(2, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
         (first,) = pool.map(DOUBLE, ["loss = 1.0\n"], SETTINGS)
