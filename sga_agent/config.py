@@ -82,12 +82,16 @@ class LoopConfig:
         "full": every candidate gets the full fit. "multi": every candidate is first screened
         by a cheaper fit (``screen_fidelity``, see
         :attr:`~sga_agent.task.EvaluationSettings.fidelity`) and the best ``promote`` share of
-        an iteration's valid screens (rounded up, at least one) gets the full fit; only full
-        fits enter the heap, the prompt and the parents.
+        an iteration's valid screens (rounded up, at least one) that beat the
+        ``promote_rank``-th best valid screen of the earlier iterations gets the full fit; only
+        full fits enter the heap, the prompt and the parents.
     screen_fidelity : float
         The screen's share of the full fit's work, in (0, 1).
     promote : float
         The share of an iteration's valid screens promoted to the full fit, in (0, 1].
+    promote_rank : int, optional
+        The rank of the earlier screen a screen must beat to be promoted (None: ``top_k``,
+        i.e. its screen says it may enter the top K; 1: only a new best).
     """
 
     iterations: int = 5
@@ -99,6 +103,7 @@ class LoopConfig:
     fidelity: str = "full"
     screen_fidelity: float = 0.2
     promote: float = 0.25
+    promote_rank: int | None = None
 
     def __post_init__(self) -> None:
         _at_least(self, ("iterations", "top_k"), 1, "at least 1")
@@ -116,6 +121,8 @@ class LoopConfig:
             raise ConfigError(f"screen_fidelity must lie in (0, 1), got {self.screen_fidelity}")
         if not 0 < self.promote <= 1:
             raise ConfigError(f"promote must lie in (0, 1], got {self.promote}")
+        if self.promote_rank is not None and self.promote_rank < 1:
+            raise ConfigError(f"promote_rank must be at least 1, got {self.promote_rank}")
 
     @property
     def offspring(self) -> int:

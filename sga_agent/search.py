@@ -29,7 +29,7 @@ from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Propos
 from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
-__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals", "promoted"]
+__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals", "kth_best", "promoted"]
 
 
 class Evaluator(Protocol):
@@ -125,6 +125,7 @@ class Search:
         self._screens = recorded.screens
         self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self._screen_fingerprints: dict[str, tuple[str, Evaluation]] = {}
+        self._screened_losses: dict[str, float] = {}  # fingerprint -> valid screen's loss
         self._captured: dict[str, Any] = {}  # fingerprint -> a promoted screen's captured data
         self.heap = SolutionHeap()
         self.totals = Totals(seconds=recorded.seconds)
@@ -259,7 +260,9 @@ class Search:
         evaluation; the budget that stopped it ("" if none) and the candidates the full
         evaluation gets: the rejected (recorded as such), those evaluated in full without a
         screen (the same code earlier) and the best ``promote`` share of the valid screens,
-        counting identical code once (:func:`promoted`): a resumed run promotes the same.
+        counting identical code once, that beat the ``promote_rank``-th (default K-th) best
+        valid screen of the earlier iterations (:func:`promoted`): a resumed run promotes the
+        same.
         Each screen is stored the moment it finishes; the promoted screens' captured data is
         kept for their full fit."""
         settings = dataclasses.replace(self.settings, fidelity=self.loop.screen_fidelity)
@@ -300,9 +303,13 @@ class Search:
                 copy = Evaluation.from_dict(evaluation.to_dict())
                 copy.extras["duplicate_of"] = first
                 self._store_screen(candidate, codes[candidate], copy)
-        keys = promoted(
-            [(key, self._screens[candidate]) for candidate, key in screened], self.loop.promote
-        )
+        screens = [(key, self._screens[candidate]) for candidate, key in screened]
+        rank = self.loop.promote_rank or self.loop.top_k
+        bar = kth_best(list(self._screened_losses.values()), rank)
+        keys = promoted(screens, self.loop.promote, bar)
+        for key, screen in screens:
+            if screen.valid:
+                self._screened_losses.setdefault(key, screen.loss)
         self._captured = {key: data for key, data in self._captured.items() if key in keys}
         return stopped, passed | {candidate for candidate, key in screened if key in keys}
 
@@ -425,16 +432,21 @@ class Search:
         }
 
 
-def promoted(screens: list[tuple[str, Evaluation]], share: float) -> set[str]:
+def promoted(screens: list[tuple[str, Evaluation]], share: float, bar: float) -> set[str]:
     """The fingerprints promoted to the full fit among ``screens`` (fingerprint, screen), in
     the candidates' order: the lowest screen losses of the valid ones, ``share`` of their
-    distinct fingerprints rounded up (at least one when any is valid); ties go to the earlier.
-    """
-    ranked: list[str] = []
-    for key, _ in sorted(
+    distinct fingerprints rounded up (at least one when any is valid; ties go to the earlier),
+    less those whose loss is not below ``bar``."""
+    ranked: list[tuple[str, float]] = []
+    for key, screen in sorted(
         ((key, screen) for key, screen in screens if screen.valid),
         key=lambda item: item[1].loss,  # sorted is stable: ties keep the candidates' order
     ):
-        if key not in ranked:
-            ranked.append(key)
-    return set(ranked[: math.ceil(share * len(ranked))])
+        if key not in dict(ranked):
+            ranked.append((key, screen.loss))
+    return {key for key, loss in ranked[: math.ceil(share * len(ranked))] if loss < bar}
+
+
+def kth_best(losses: list[float], k: int) -> float:
+    """The k-th lowest of ``losses``; infinity while there are fewer than k."""
+    return sorted(losses)[k - 1] if len(losses) >= k else math.inf

@@ -107,7 +107,11 @@ def from_preset(name: str) -> str:
 @click.option("--promote", type=click.FloatRange(0, 1, min_open=True),
               show_default=str(default("promote")),
               help="Share of an iteration's valid screens promoted to the full fit "
-              "(--fidelity multi; rounded up, at least one).")
+              "(--fidelity multi; rounded up, at least one), of those below the bar of "
+              "--promote-rank.")
+@click.option("--promote-rank", type=click.IntRange(min=1), show_default="--top-k",
+              help="The bar of promotion (--fidelity multi): a screen is promoted only "
+              "below the screen of this rank among the earlier iterations' valid ones.")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
               help="Do not fit parameters: evaluate the proposed defaults.")
 @click.option("--epochs", type=click.IntRange(min=0), show_default="the task's; 5 in quick",

@@ -16,7 +16,7 @@ import pytest
 
 from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.run_store import RunStore
-from sga_agent.search import SEED, Search, promoted
+from sga_agent.search import SEED, Search, kth_best, promoted
 from sga_agent.task import Evaluation
 from tests.sga_agent.test_search import LAW as SEARCH_LAW
 from tests.sga_agent.test_search import FakeTask, Scripted
@@ -84,11 +84,20 @@ def test_promotion_takes_the_best_share_of_the_valid_screens_once_per_code():
                ("d", screen(3.0)), ("b", screen(1.0)), ("e", screen(3.0)),
                ("f", screen(9.0))]  # fmt: skip
     # valid distinct codes: a, b, d, e, f: a quarter rounded up is 2; d ties e and comes first
-    assert promoted(screens, 0.25) == {"b", "d"}
-    assert promoted(screens, 0.5) == {"b", "d", "e"}
-    assert promoted(screens, 1.0) == {"a", "b", "d", "e", "f"}
-    assert promoted(screens[:1], 0.01) == {"a"}  # at least one
-    assert promoted([("c", screen(0.0, valid=False))], 1.0) == set()
+    inf = float("inf")
+    assert promoted(screens, 0.25, inf) == {"b", "d"}
+    assert promoted(screens, 0.5, inf) == {"b", "d", "e"}
+    assert promoted(screens, 1.0, inf) == {"a", "b", "d", "e", "f"}
+    assert promoted(screens[:1], 0.01, inf) == {"a"}  # at least one
+    assert promoted([("c", screen(0.0, valid=False))], 1.0, inf) == set()
+    # only those below the bar (the K-th best screen of the earlier iterations)
+    assert promoted(screens, 0.5, 3.0) == {"b"}
+    assert promoted(screens, 1.0, 1.0) == set()
+
+
+def test_the_bar_is_the_k_th_best_earlier_screen():
+    assert kth_best([4.0, 1.0, 3.0, 2.0], 3) == 3.0
+    assert kth_best([4.0, 1.0], 3) == float("inf")
 
 
 def test_the_heap_and_the_prompt_hold_full_fidelity_scores_only(tmp_path):
@@ -152,6 +161,20 @@ def test_screen_ranks_can_differ_from_full_ones(tmp_path):
     assert result.best.loss == 50.0  # the law of full loss 1.0 was screened out
 
 
+def test_later_screens_are_promoted_only_below_the_k_th_best_earlier_screen(tmp_path):
+    # iteration 1's screens: 0.003 to 0.009, the third best (K = 3) 0.006
+    second = [law(4.0, screen=0.004), law(6.1, screen=0.0061), law(7.5, screen=0.0075),
+              law(8.5, screen=0.0085), law(9.5, screen=0.0095), law(10.0, screen=0.01)]  # fmt: skip
+    _, store, _ = run(tmp_path, ANSWERS[:6] + second)
+    # a quarter of six, rounded up, is two: 0.004 and 0.0061, of which only the first < 0.006
+    assert sorted(by_type(store, "evaluation")) == sorted(
+        [SEED, "01-exploit-01", "01-explore-01", "02-exploit-00"]
+    )
+    # with the bar at the best earlier screen (0.003), none of iteration 2 is fitted in full
+    _, store, _ = run(tmp_path / "rank-1", ANSWERS[:6] + second, promote_rank=1)
+    assert sorted(by_type(store, "evaluation")) == sorted([SEED, "01-exploit-01", "01-explore-01"])
+
+
 def test_resume_of_a_killed_multi_fidelity_run_continues_where_it_stopped(tmp_path):
     whole, whole_store, whole_calls = run(tmp_path / "whole", ANSWERS)
     cfg = config()
@@ -185,7 +208,7 @@ def test_full_fidelity_is_the_default_and_old_configs_load_without_the_setting(t
     plain = SearchConfig.from_settings(task="fake", proposer="scripted")
     assert plain.loop.fidelity == "full"
     data = plain.to_dict()
-    for name in ("fidelity", "screen_fidelity", "promote"):
+    for name in ("fidelity", "screen_fidelity", "promote", "promote_rank"):
         del data["loop"][name]
     from sga_agent.task import NoOptions
 
@@ -197,7 +220,8 @@ def test_full_fidelity_is_the_default_and_old_configs_load_without_the_setting(t
 
 
 @pytest.mark.parametrize("setting", [{"fidelity": "half"}, {"screen_fidelity": 1.0},
-                                     {"screen_fidelity": 0.0}, {"promote": 0.0}])  # fmt: skip
+                                     {"screen_fidelity": 0.0}, {"promote": 0.0},
+                                     {"promote_rank": 0}])  # fmt: skip
 def test_bad_fidelity_settings_are_refused(setting):
     with pytest.raises(ConfigError):
         config(**setting)
