@@ -70,6 +70,7 @@ def test_good_solution_is_evaluated_despite_its_prints():
         "learning_rate": 0.1,
         "seed": 7,
         "options": {"label": "seven", "notes": None},  # the fit worker's DoubleOptions
+        "fidelity": 1.0,
     }
     assert 0 < evaluation.extras["capture_seconds"] <= evaluation.seconds < 60
     assert evaluation.artifacts["captured"]["loss"] == 0.25  # what the fit was given
