@@ -46,6 +46,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "opro": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": False},
 }
 
+#: Full fits only, or screens and full fits of the promoted (:class:`LoopConfig`).
+FIDELITIES = ("full", "multi")
 #: Where candidates are evaluated: this machine's process pool, or a Ray cluster.
 EXECUTORS = ("local", "ray")
 #: A Ray head node's GCS address, HOST:PORT (the port ``ray start --head`` printed).
@@ -76,6 +78,20 @@ class LoopConfig:
         exploit (low) and explore (high) temperature (M_l, M_h).
     exploit_temperature, explore_temperature : float
         T_l and T_h (paper: 0.5 and 1.0).
+    fidelity : str
+        "full": every candidate gets the full fit. "multi": every candidate is first screened
+        by a cheaper fit (``screen_fidelity``, see
+        :attr:`~sga_agent.task.EvaluationSettings.fidelity`) and the best ``promote`` share of
+        an iteration's valid screens (rounded up, at least one) that beat the
+        ``promote_rank``-th best valid screen of the earlier iterations gets the full fit; only
+        full fits enter the heap, the prompt and the parents.
+    screen_fidelity : float
+        The screen's share of the full fit's work, in (0, 1).
+    promote : float
+        The share of an iteration's valid screens promoted to the full fit, in (0, 1].
+    promote_rank : int, optional
+        The rank of the earlier screen a screen must beat to be promoted (None: ``top_k``,
+        i.e. its screen says it may enter the top K; 1: only a new best).
     """
 
     iterations: int = 5
@@ -84,6 +100,10 @@ class LoopConfig:
     explore: int = 12
     exploit_temperature: float = 0.5
     explore_temperature: float = 1.0
+    fidelity: str = "full"
+    screen_fidelity: float = 0.2
+    promote: float = 0.25
+    promote_rank: int | None = None
 
     def __post_init__(self) -> None:
         _at_least(self, ("iterations", "top_k"), 1, "at least 1")
@@ -93,6 +113,16 @@ class LoopConfig:
         for name in ("exploit_temperature", "explore_temperature"):
             if not 0 <= getattr(self, name) <= 2:
                 raise ConfigError(f"{name} must lie in [0, 2], got {getattr(self, name)}")
+        if self.fidelity not in FIDELITIES:
+            raise ConfigError(
+                f"fidelity must be one of {', '.join(FIDELITIES)}, got {self.fidelity!r}"
+            )
+        if not 0 < self.screen_fidelity < 1:
+            raise ConfigError(f"screen_fidelity must lie in (0, 1), got {self.screen_fidelity}")
+        if not 0 < self.promote <= 1:
+            raise ConfigError(f"promote must lie in (0, 1], got {self.promote}")
+        if self.promote_rank is not None and self.promote_rank < 1:
+            raise ConfigError(f"promote_rank must be at least 1, got {self.promote_rank}")
 
     @property
     def offspring(self) -> int:

@@ -99,6 +99,19 @@ class CandidateEvaluated(Event):
 
 
 @dataclass(frozen=True)
+class CandidateScreened(Event):
+    """A candidate's finished screen: its evaluation at the reduced ``fidelity`` of a
+    multi-fidelity search (``Evaluation.to_dict()`` without its artifacts). Its loss is
+    comparable only with other screens'; the full fit, if the candidate is promoted to it, is
+    its ``evaluation`` event."""
+
+    type: ClassVar[str] = "screened"
+    candidate: str
+    fidelity: float
+    evaluation: dict[str, Any]
+
+
+@dataclass(frozen=True)
 class IterationStarted(Event):
     """An outer iteration begins: its proposals are asked for next."""
 

@@ -6,7 +6,7 @@ OPTIONS is the JSON text of the task options of every evaluation it makes
 it once. It scores captured solutions: one request per line of its standard input::
 
     {"data": <what the task's capture returned>,
-     "settings": {"epochs": ..., "learning_rate": ..., "seed": ...}}
+     "settings": {"epochs": ..., "learning_rate": ..., "seed": ..., "fidelity": ...}}
 
 and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
 It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's

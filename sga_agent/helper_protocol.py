@@ -33,17 +33,20 @@ class FitSettings:
     learning_rate: float | None
     seed: int
     options: str
+    fidelity: float = 1.0
 
     @classmethod
     def of(cls, settings: EvaluationSettings) -> FitSettings:
         """``settings`` ready to send; ``TypeError`` if their options cannot be (not a
         dataclass, or holding a value JSON cannot write). No options: the task's defaults."""
         options = "{}" if settings.options is None else options_json(settings.options)
-        return cls(settings.epochs, settings.learning_rate, settings.seed, options)
+        return cls(settings.epochs, settings.learning_rate, settings.seed, options,
+                   settings.fidelity)  # fmt: skip
 
     def request(self) -> dict[str, Any]:
         """The settings each request carries: all but the options."""
-        return {"epochs": self.epochs, "learning_rate": self.learning_rate, "seed": self.seed}
+        return {"epochs": self.epochs, "learning_rate": self.learning_rate, "seed": self.seed,
+                "fidelity": self.fidelity}  # fmt: skip
 
 
 def start_helper() -> IO[str]:

@@ -202,8 +202,16 @@ class RayPool:
             "--ray-memory-mb, or add larger nodes"
         )
 
-    def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
+    def submit(
+        self,
+        task: str,
+        solution: str,
+        settings: EvaluationSettings,
+        captured: dict[str, Any] | None = None,
+    ) -> Future[Evaluation]:
         """Start evaluating one solution on the cluster; the future's result is its Evaluation.
+        ``captured`` fits it again without a capture (see
+        :meth:`~sga_agent.sandbox.EvaluationSlot.evaluate`).
 
         Raises ``TypeError`` at once if ``settings.options`` cannot be sent (see
         :func:`~sga_agent.sandbox.evaluate_in_sandbox`); a bad candidate or a lost Ray slot
@@ -213,7 +221,7 @@ class RayPool:
         """
         sent = FitSettings.of(settings)
         self._warm_up(task, sent.options)
-        return self._executor.submit(self._evaluate, task, solution, sent)
+        return self._executor.submit(self._evaluate, task, solution, sent, captured)
 
     def _warm_up(self, task: str, options: str) -> None:
         """Have every slot start its helpers for ``task`` and ``options``, once: they load
@@ -226,7 +234,9 @@ class RayPool:
         for actor in slots:
             actor.start_helpers.remote(task, options)
 
-    def _evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
+    def _evaluate(
+        self, task: str, solution: str, settings: FitSettings, captured: dict[str, Any] | None
+    ) -> Evaluation:
         """One candidate on a free slot; once more on another if the slot dies meanwhile."""
         retried = ""
         for attempt in range(1 + SLOT_RETRIES):
@@ -236,7 +246,8 @@ class RayPool:
                     "lost on Ray: no slot of the cluster is left to evaluate it", status="crashed"
                 )
             try:
-                evaluation = self._ray.get(actor.evaluate.remote(task, solution, settings))
+                running = actor.evaluate.remote(task, solution, settings, captured)
+                evaluation = self._ray.get(running)
             except self._ray.exceptions.LocalRayletDiedError as error:
                 raise _cluster_lost(error) from error
             except self._ray.exceptions.RayActorError as error:
@@ -355,10 +366,16 @@ class NodeSlot:
         with contextlib.suppress(OSError):  # the evaluation that needs them will report it
             self._slot.start_helpers(task, options)
 
-    def evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
+    def evaluate(
+        self,
+        task: str,
+        solution: str,
+        settings: FitSettings,
+        captured: dict[str, Any] | None = None,
+    ) -> Evaluation:
         """One sandboxed evaluation on this node (never raises); its extras name the node."""
         try:
-            evaluation = self._slot.evaluate(task, solution, settings)
+            evaluation = self._slot.evaluate(task, solution, settings, captured=captured)
         except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
             reason = f"the sandbox failed on Ray node {self._node}: "
             evaluation = Evaluation.invalid(f"{reason}{type(error).__name__}: {error}",

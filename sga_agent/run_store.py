@@ -8,7 +8,9 @@ Layout of ``runs/<id>/``::
     candidates/<id>/       messages.json (the prompt, when the proposer read it),
                            response.txt, proposal.json, code.py, evaluation.json,
                            feedback.txt, curves.json, artifacts.json (what the trusted fit
-                           left: the captured data, the best trajectory)
+                           left: the captured data, the best trajectory); screen.json, the
+                           screen of a multi-fidelity search (a candidate that was not
+                           promoted to the full fit has no evaluation.json)
     heap/iteration-NN.json the top of the heap after each iteration
     provenance.json        what the run is measured against (the task's ``provenance``: an
                            observation's hash, the truth it read), written when its first
@@ -50,6 +52,8 @@ PROVENANCE = "provenance.json"
 SEED = "00-seed"
 #: A candidate's artifacts (what the trusted fit left for reports), beside its evaluation.
 ARTIFACTS = "artifacts.json"
+#: A candidate's screen in a multi-fidelity search (its cheaper evaluation), beside the full one.
+SCREEN = "screen.json"
 
 
 class RunStoreError(RuntimeError):
@@ -70,11 +74,13 @@ _HELD: dict[Path, IO[str]] = {}
 
 @dataclass
 class Recorded:
-    """What a run folder already holds: model answers and evaluations, by candidate id, and
-    the wall seconds its searches ran (each from its ``search_started`` to its last event)."""
+    """What a run folder already holds: model answers, full-fidelity evaluations and screens
+    (a multi-fidelity search's cheaper evaluations), by candidate id, and the wall seconds its
+    searches ran (each from its ``search_started`` to its last event)."""
 
     proposals: dict[str, dict[str, Any]] = field(default_factory=dict)
     evaluations: dict[str, Evaluation] = field(default_factory=dict)
+    screens: dict[str, Evaluation] = field(default_factory=dict)
     finished: bool = False
     seconds: float = 0.0
 
@@ -237,6 +243,8 @@ class RunStore:
                 recorded.proposals[event["candidate"]] = event["proposal"]
             elif kind == ev.CandidateEvaluated.type:
                 recorded.evaluations[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
+            elif kind == ev.CandidateScreened.type:
+                recorded.screens[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
             elif kind == ev.RunFinished.type:
                 recorded.finished = True
         if started is not None and last is not None:
@@ -272,6 +280,15 @@ class RunStore:
         if artifacts:
             _dump(folder / ARTIFACTS, artifacts)
         _write(folder / "feedback.txt", evaluation.feedback)
+
+    def save_screen(self, candidate: str, code: str, evaluation: Evaluation) -> None:
+        """A candidate's screen (its code, and ``screen.json``: the evaluation without its
+        artifacts) beside its full evaluation, if it gets one."""
+        folder = self.candidate_dir(candidate)
+        _write(folder / "code.py", code)
+        data = evaluation.to_dict()
+        data.pop("artifacts")
+        _dump(folder / SCREEN, data)
 
     def save_heap(self, iteration: int, top: list[dict[str, Any]]) -> None:
         folder = self.path / "heap"

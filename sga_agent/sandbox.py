@@ -475,37 +475,42 @@ class EvaluationSlot:
         solution: str,
         settings: FitSettings,
         on_captured: Callable[[str, str], None] | None = None,
+        captured: dict[str, Any] | None = None,
     ) -> Evaluation:
         """Capture then fit one solution; every failure is an invalid Evaluation.
 
         A fit worker that is not running yet is started first, so that it loads while the
         capture runs. ``on_captured(task, options)`` (the options as JSON) is called once the
         capture step has ended. A step tried again (see the class docstring) has the time it
-        had the first time.
+        had the first time. ``captured``, the data an earlier evaluation of this solution
+        captured (its ``artifacts["captured"]``, inert data the fit checks again), skips the
+        capture: the solution is fitted again, at another fidelity say.
         """
         start = time.monotonic()
         options, request = settings.options, settings.request()
         self._start_fit_worker(task, options)
         retried: list[str] = []
         attempt = start
-        captured = self._captured(task, solution)
-        if isinstance(captured, _Blameless) and not self._stopped:
-            retried.append(captured.why)
-            attempt = time.monotonic()
-            captured = self._captured(task, solution)
-        captured = _verdict(captured)
+        outcome: dict[str, Any] | Evaluation | _Blameless | None = captured
+        if outcome is None:
+            outcome = self._captured(task, solution)
+            if isinstance(outcome, _Blameless) and not self._stopped:
+                retried.append(outcome.why)
+                attempt = time.monotonic()
+                outcome = self._captured(task, solution)
+            outcome = _verdict(outcome)
         captured_at = time.monotonic()
         if on_captured is not None:
             on_captured(task, options)
-        if isinstance(captured, Evaluation):
-            evaluation = captured
+        if isinstance(outcome, Evaluation):
+            evaluation = outcome
         else:
             remaining = self.limits.timeout_s - (captured_at - attempt)
-            fitted = self._fitted(captured, request, remaining)
+            fitted = self._fitted(outcome, request, remaining)
             if isinstance(fitted, _Blameless) and not self._stopped:
                 retried.append(fitted.why)
                 self._start_fit_worker(task, options)
-                fitted = self._fitted(captured, request, remaining)
+                fitted = self._fitted(outcome, request, remaining)
             evaluation = _verdict(fitted)
         evaluation.seconds = time.monotonic() - start
         evaluation.extras.setdefault("capture_seconds", round(captured_at - start, 3))
@@ -976,15 +981,22 @@ class SandboxPool:
             return Isolation.none("disabled (SandboxLimits.isolation=False)")
         return detect_isolation()
 
-    def submit(self, task: str, solution: str, settings: EvaluationSettings) -> Future[Evaluation]:
+    def submit(
+        self,
+        task: str,
+        solution: str,
+        settings: EvaluationSettings,
+        captured: dict[str, Any] | None = None,
+    ) -> Future[Evaluation]:
         """Start evaluating one solution; the future's result is its :class:`Evaluation`.
 
+        ``captured`` (see :meth:`EvaluationSlot.evaluate`) fits it again without a capture.
         Raises ``TypeError`` at once if ``settings.options`` cannot be sent (see
         :func:`evaluate_in_sandbox`); a bad candidate never raises: its future holds an invalid
         Evaluation.
         """
         sent = FitSettings.of(settings)
-        return self._executor.submit(self._evaluate, task, solution, sent)
+        return self._executor.submit(self._evaluate, task, solution, sent, captured)
 
     def map(
         self, task: str, solutions: Iterable[str], settings: EvaluationSettings
@@ -1024,10 +1036,12 @@ class SandboxPool:
         else:
             self.terminate()
 
-    def _evaluate(self, task: str, solution: str, settings: FitSettings) -> Evaluation:
+    def _evaluate(
+        self, task: str, solution: str, settings: FitSettings, captured: dict[str, Any] | None
+    ) -> Evaluation:
         evaluator = self._slots.get()
         try:
-            return evaluator.evaluate(task, solution, settings, self._start_idle_slots)
+            return evaluator.evaluate(task, solution, settings, self._start_idle_slots, captured)
         except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
             reason = f"the sandbox failed: {type(error).__name__}: {error}"
             return Evaluation.invalid(reason, status="error")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, as_completed
@@ -28,20 +29,29 @@ from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Propos
 from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
-__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals"]
+__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals", "kth_best", "promoted"]
 
 
 class Evaluator(Protocol):
-    """Evaluates solutions of a task concurrently (the sandbox pool, or a test double)."""
+    """Evaluates solutions of a task concurrently (the sandbox pool, or a test double).
+
+    A multi-fidelity search passes ``captured`` (a keyword, only then) for a promoted
+    candidate: the data its screen captured, fitted again without a capture.
+    """
 
     def submit(
-        self, task: str, solution: str, settings: EvaluationSettings
+        self,
+        task: str,
+        solution: str,
+        settings: EvaluationSettings,
+        captured: dict[str, Any] | None = None,
     ) -> Future[Evaluation]: ...
 
 
 @dataclass
 class Totals:
-    """Tokens, money, evaluations and wall seconds spent so far."""
+    """Tokens, money, evaluations (full fits and screens) and wall seconds spent so far;
+    ``screened`` counts the screens, ``valid`` and ``invalid`` the full evaluations."""
 
     tokens: int = 0
     cost_usd: float = 0.0
@@ -49,6 +59,7 @@ class Totals:
     seconds: float = 0.0
     valid: int = 0
     invalid: int = 0
+    screened: int = 0
 
 
 @dataclass
@@ -111,7 +122,11 @@ class Search:
         recorded = store.recorded()
         self._answers = recorded.proposals
         self._evaluations = recorded.evaluations
+        self._screens = recorded.screens
         self._fingerprints: dict[str, tuple[str, Evaluation]] = {}
+        self._screen_fingerprints: dict[str, tuple[str, Evaluation]] = {}
+        self._screened_losses: dict[str, float] = {}  # fingerprint -> valid screen's loss
+        self._captured: dict[str, Any] = {}  # fingerprint -> a promoted screen's captured data
         self.heap = SolutionHeap()
         self.totals = Totals(seconds=recorded.seconds)
         self._seconds_before = recorded.seconds  # the run's earlier sessions
@@ -138,7 +153,7 @@ class Search:
                 break
             self._emit(ev.IterationStarted(iteration))
             answers = self._answers_for(iteration, self.heap.top(self.loop.top_k))
-            stopped = self._evaluate_all(
+            stopped = self._evaluate_iteration(
                 [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
             )
             top = [entry.summary() for entry in self.heap.top(self.loop.top_k)]
@@ -228,6 +243,90 @@ class Search:
 
     # ------------------------------------------------------------------ evaluations
 
+    def _evaluate_iteration(self, candidates: list[tuple[str, str, Evaluation | None]]) -> str:
+        """Evaluate an iteration's candidates: all in full, or (multi-fidelity) screen them
+        and evaluate in full the promoted ones; returns the budget that stopped it, if any."""
+        if self.loop.fidelity == "full":
+            return self._evaluate_all(candidates)
+        stopped, promoted = self._screen_all(candidates)
+        if stopped:
+            return stopped
+        return self._evaluate_all([entry for entry in candidates if entry[0] in promoted])
+
+    def _screen_all(
+        self, candidates: list[tuple[str, str, Evaluation | None]]
+    ) -> tuple[str, set[str]]:
+        """Screen (or look up the screen of) every candidate that has none and no full
+        evaluation; the budget that stopped it ("" if none) and the candidates the full
+        evaluation gets: the rejected (recorded as such), those evaluated in full without a
+        screen (the same code earlier) and the best ``promote`` share of the valid screens,
+        counting identical code once, that beat the ``promote_rank``-th (default K-th) best
+        valid screen of the earlier iterations (:func:`promoted`): a resumed run promotes the
+        same.
+        Each screen is stored the moment it finishes; the promoted screens' captured data is
+        kept for their full fit."""
+        settings = dataclasses.replace(self.settings, fidelity=self.loop.screen_fidelity)
+        passed: set[str] = set()
+        screened: list[tuple[str, str]] = []  # (candidate, fingerprint)
+        pending: dict[Future[Evaluation], tuple[str, str]] = {}  # -> (candidate, code)
+        submitted: set[str] = set()
+        stopped = ""
+        for candidate, code, rejection in candidates:
+            key = fingerprint(code)
+            evaluated = candidate in self._evaluations or key in self._fingerprints
+            if rejection is not None or (evaluated and candidate not in self._screens):
+                passed.add(candidate)  # a screened one stays in the ranking (a resume)
+                continue
+            if candidate in self._screens:  # recorded by an earlier session of the run
+                screen = self._screens[candidate]
+                self._screen_fingerprints.setdefault(key, (candidate, screen))
+                self._count_screen(screen)
+            elif key not in self._screen_fingerprints and key not in submitted:
+                stopped = self._submission_refused(len(submitted))
+                if stopped:
+                    break
+                submitted.add(key)
+                future = self.evaluator.submit(self.config.task, code, settings)
+                pending[future] = (candidate, code)
+            screened.append((candidate, key))
+        codes = {candidate: code for candidate, code, _ in candidates}
+        for future in as_completed(pending):
+            candidate, code = pending[future]
+            evaluation = future.result()
+            key = fingerprint(code)
+            self._screen_fingerprints.setdefault(key, (candidate, evaluation))
+            self._captured[key] = evaluation.artifacts.get("captured")
+            self._store_screen(candidate, code, evaluation)
+        for candidate, key in screened:
+            if candidate not in self._screens:  # the same code as an earlier candidate
+                first, evaluation = self._screen_fingerprints[key]
+                copy = Evaluation.from_dict(evaluation.to_dict())
+                copy.extras["duplicate_of"] = first
+                self._store_screen(candidate, codes[candidate], copy)
+        screens = [(key, self._screens[candidate]) for candidate, key in screened]
+        rank = self.loop.promote_rank or self.loop.top_k
+        bar = kth_best(list(self._screened_losses.values()), rank)
+        keys = promoted(screens, self.loop.promote, bar)
+        for key, screen in screens:
+            if screen.valid:
+                self._screened_losses.setdefault(key, screen.loss)
+        self._captured = {key: data for key, data in self._captured.items() if key in keys}
+        return stopped, passed | {candidate for candidate, key in screened if key in keys}
+
+    def _store_screen(self, candidate: str, code: str, evaluation: Evaluation) -> None:
+        """Write a finished screen to the run store (its event last: the commit point)."""
+        self._screens[candidate] = evaluation
+        self.store.save_screen(candidate, code, evaluation)
+        self._count_screen(evaluation)
+        event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}
+        self._emit(ev.CandidateScreened(candidate, self.loop.screen_fidelity, event))
+
+    def _count_screen(self, screen: Evaluation) -> None:
+        """Count a screen (not a copy for identical code) as an evaluation."""
+        fresh = "duplicate_of" not in screen.extras
+        self.totals.evaluations += fresh
+        self.totals.screened += fresh
+
     def _evaluate_all(self, candidates: list[tuple[str, str, Evaluation | None]]) -> str:
         """Evaluate (or look up) every candidate; returns the budget that stopped it, if any.
 
@@ -252,9 +351,7 @@ class Search:
                 if stopped:
                     break
                 submitted.add(key)
-                pending[self.evaluator.submit(self.config.task, code, self.settings)] = (
-                    candidate, code,
-                )  # fmt: skip
+                pending[self._submit(code, key)] = (candidate, code)
             order.append((candidate, code, key))
         for future in as_completed(pending):
             self._store(*pending[future], future.result())
@@ -266,6 +363,14 @@ class Search:
                 self._store(candidate, code, copy)
             self._push(candidate, code, key, self._evaluations[candidate])
         return stopped
+
+    def _submit(self, code: str, key: str) -> Future[Evaluation]:
+        """Submit the full evaluation of ``code`` (fingerprint ``key``): fitted again from
+        its screen's captured data where that is at hand, else captured anew."""
+        captured = self._captured.pop(key, None)
+        if captured is None:
+            return self.evaluator.submit(self.config.task, code, self.settings)
+        return self.evaluator.submit(self.config.task, code, self.settings, captured=captured)
 
     def _store(self, candidate: str, code: str, evaluation: Evaluation) -> None:
         """Write a finished evaluation to the run store (its event last: the commit point)."""
@@ -323,4 +428,25 @@ class Search:
             "evaluations": result.totals.evaluations,
             "valid": result.totals.valid,
             "invalid": result.totals.invalid,
+            "screened": result.totals.screened,
         }
+
+
+def promoted(screens: list[tuple[str, Evaluation]], share: float, bar: float) -> set[str]:
+    """The fingerprints promoted to the full fit among ``screens`` (fingerprint, screen), in
+    the candidates' order: the lowest screen losses of the valid ones, ``share`` of their
+    distinct fingerprints rounded up (at least one when any is valid; ties go to the earlier),
+    less those whose loss is not below ``bar``."""
+    ranked: list[tuple[str, float]] = []
+    for key, screen in sorted(
+        ((key, screen) for key, screen in screens if screen.valid),
+        key=lambda item: item[1].loss,  # sorted is stable: ties keep the candidates' order
+    ):
+        if key not in dict(ranked):
+            ranked.append((key, screen.loss))
+    return {key for key, loss in ranked[: math.ceil(share * len(ranked))] if loss < bar}
+
+
+def kth_best(losses: list[float], k: int) -> float:
+    """The k-th lowest of ``losses``; infinity while there are fewer than k."""
+    return sorted(losses)[k - 1] if len(losses) >= k else math.inf

@@ -51,13 +51,16 @@ class SearchProgress:
         )
         self.config = config
         self.spend = uses_a_model(config)
-        done = list((recorded or Recorded()).evaluations.values())
+        recorded = recorded or Recorded()
+        done = list(recorded.evaluations.values())
         self.best = min((e.loss for e in done if e.valid), default=math.inf)
         self.failed = sum(not e.valid for e in done)
+        self.screened = set(recorded.screens)  # candidates done once screened (multi-fidelity)
         total = 1 + config.loop.iterations * config.loop.offspring
         description = "resuming" if done else "seed"
+        completed = len(recorded.evaluations.keys() | recorded.screens.keys())
         self.bar = self.progress.add_task(
-            description, total=total, completed=len(done), status=self._status(None)
+            description, total=total, completed=completed, status=self._status(None)
         )
 
     def __enter__(self) -> SearchProgress:
@@ -75,6 +78,10 @@ class SearchProgress:
                 self.best = min(self.best, float(evaluation["loss"]))
             else:
                 self.failed += 1
+            if event.get("candidate") not in self.screened:  # a screened one counted already
+                self.progress.advance(self.bar)
+        elif kind == ev.CandidateScreened.type:
+            self.screened.add(event["candidate"])
             self.progress.advance(self.bar)
         elif kind == ev.ProposalMissing.type:
             self.failed += 1

@@ -18,7 +18,14 @@ from sga_agent.cli.options import (
     typed_task_options,
 )
 from sga_agent.cli.progress import SearchProgress, print_result
-from sga_agent.config import EXECUTORS, PRESETS, ConfigError, SearchConfig, default
+from sga_agent.config import (
+    EXECUTORS,
+    FIDELITIES,
+    PRESETS,
+    ConfigError,
+    SearchConfig,
+    default,
+)
 from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
@@ -90,6 +97,21 @@ def from_preset(name: str) -> str:
               show_default=str(default("exploit_temperature")), help="Exploit temperature T_l.")
 @click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
               show_default=str(default("explore_temperature")), help="Explore temperature T_h.")
+@click.option("--fidelity", type=click.Choice(FIDELITIES), show_default=str(default("fidelity")),
+              help="full: every candidate gets the full fit; multi: each is screened by a "
+              "cheaper fit and the best --promote share of each iteration's screens gets the "
+              "full fit (only full fits are ranked and shown).")
+@click.option("--screen-fidelity", type=click.FloatRange(0, 1, min_open=True, max_open=True),
+              show_default=str(default("screen_fidelity")),
+              help="The screen's share of the full fit's work (--fidelity multi).")
+@click.option("--promote", type=click.FloatRange(0, 1, min_open=True),
+              show_default=str(default("promote")),
+              help="Share of an iteration's valid screens promoted to the full fit "
+              "(--fidelity multi; rounded up, at least one), of those below the bar of "
+              "--promote-rank.")
+@click.option("--promote-rank", type=click.IntRange(min=1), show_default="--top-k",
+              help="The bar of promotion (--fidelity multi): a screen is promoted only "
+              "below the screen of this rank among the earlier iterations' valid ones.")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
               help="Do not fit parameters: evaluate the proposed defaults.")
 @click.option("--epochs", type=click.IntRange(min=0), show_default="the task's; 5 in quick",

@@ -34,18 +34,28 @@ class EvaluationSettings:
         The task's options: an object of its ``options_type`` (see :class:`Task`), as the
         search and its fit workers always pass them; ``None`` (a direct call) for their
         defaults. A task reads them with :meth:`options_as`.
+    fidelity : float
+        The share of the full fit's work this evaluation may spend, in (0, 1]: 1 is the full
+        fit; less is a cheaper screen (a multi-fidelity search screens every candidate and
+        fits only the most promising fully). The task decides how to cut the work (the
+        constitutive tasks fit fewer epochs on the first segments of the horizon); a task
+        that cannot screen runs its full fit. Losses of different fidelities are not
+        comparable: the search never ranks one against the other.
     """
 
     epochs: int | None = None
     learning_rate: float | None = None
     seed: int = 0
     options: Any = None
+    fidelity: float = 1.0
 
     def __post_init__(self) -> None:
         if self.epochs is not None and (not isinstance(self.epochs, int) or self.epochs < 0):
             raise ValueError(f"epochs must be a non-negative integer or None, got {self.epochs!r}")
         if self.learning_rate is not None and not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+        if isinstance(self.fidelity, bool) or not 0 < self.fidelity <= 1:
+            raise ValueError(f"fidelity must lie in (0, 1], got {self.fidelity!r}")
 
     def options_as(self, options_type: type[_Options]) -> _Options:
         """The options as an ``options_type`` object: themselves, or its defaults for None.

@@ -23,7 +23,7 @@ from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
 from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
 from taichi_mpm import runtime
-from tasks.constitutive import feedback, law_kernel
+from tasks.constitutive import feedback, fidelity, law_kernel
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
 from tasks.constitutive.inner import (
     InnerResult,
@@ -150,7 +150,9 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     """Fit the captured law ``data`` (``{"law": graph}``) to the task's observation.
 
     Invalid results carry a reason. ``settings.options`` is a
-    :class:`~tasks.constitutive.options.ConstitutiveOptions` (None: its defaults).
+    :class:`~tasks.constitutive.options.ConstitutiveOptions` (None: its defaults). A
+    ``settings.fidelity`` below 1 fits fewer epochs on the first segments only
+    (:mod:`tasks.constitutive.fidelity`); the extras record the fidelity, epochs and segments.
     """
     started = time.perf_counter()
     options = settings.options_as(ConstitutiveOptions)
@@ -166,13 +168,16 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         F = observed_deformations(observed, dtype)
         svd, factored = options.law_kernels == "all", options.law_kernels == "svd-inputs"
         law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
+    observed = fidelity.first_segments(observed, spec.reset_every, settings.fidelity)
     scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
     if spec.searched == "elastic":
         rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
     else:
         rollout = Rollout(scene, law, known_elastic_law(dtype))
     inner = InnerSettings(
-        epochs=spec.epochs if settings.epochs is None else settings.epochs,
+        epochs=fidelity.screen_epochs(
+            spec.epochs if settings.epochs is None else settings.epochs, settings.fidelity
+        ),
         learning_rate=settings.learning_rate or spec.learning_rate,
         reset_every=spec.reset_every,
         optimizer=options.optimizer or spec.optimizer,
@@ -188,7 +193,10 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
             feedback.trajectory_text(result.positions, observed.positions, scene.dt, corners),
         ]
     )
-    return fitted_evaluation(result, text, started)
+    evaluation = fitted_evaluation(result, text, started)
+    evaluation.extras.update(fidelity=settings.fidelity, epochs=inner.epochs,
+                             segments=fidelity.segments(observed, spec.reset_every))  # fmt: skip
+    return evaluation
 
 
 def observed_deformations(observed: Trajectory, dtype: torch.dtype) -> torch.Tensor:

@@ -223,3 +223,63 @@ def test_killed_search_resumes_to_the_same_heap(tmp_path):
     replayed = json.loads(replay.stdout.strip().splitlines()[-1])
     assert after["top"] == replayed["top"]
     assert after["evaluations"] == replayed["evaluations"] == 7
+
+
+def screened_in_iteration_1(log: Path) -> int:
+    """How many iteration-1 screens the sandbox finished."""
+    screened = 0
+    for line in log.read_text().splitlines():
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line being written
+        screened += event.get("type") == "screened"
+    return screened
+
+
+@pytest.mark.slow
+def test_killed_multi_fidelity_search_resumes_to_the_same_heap(tmp_path):
+    """--fidelity multi: kill -9 once the first screen is stored, resume, compare with a
+    replayed run; the four laws that run are screened, the best valid screen's fitted in full."""
+    multi = ("--fidelity", "multi", "--screen-fidelity", "0.5", "--promote", "0.25")
+    with ScriptedOpenAIServer(SCRIPT) as server:
+        process = subprocess.Popen(
+            search_command(tmp_path / "killed", *model(server.url), *multi),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment(),
+            start_new_session=True,
+        )  # fmt: skip
+        events = None
+        deadline = time.time() + 600
+        while time.time() < deadline:
+            logs = list((tmp_path / "killed").glob("*/events.jsonl"))
+            if logs and screened_in_iteration_1(logs[0]) >= 1:
+                events = logs[0]
+                break
+            time.sleep(0.05)
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    assert events is not None, "the search never got to iteration 1"
+    folder = events.parent
+    assert screened_in_iteration_1(events) < 4, "the kill came after every screen finished"
+    loop = json.loads((folder / "config.json").read_text())["config"]["loop"]
+    assert (loop["fidelity"], loop["screen_fidelity"], loop["promote"]) == ("multi", 0.5, 0.25)
+
+    resumed = subprocess.run(
+        [sys.executable, "-m", "sga_agent", "resume", str(folder), "--json"],
+        capture_output=True, text=True, timeout=900, env=environment(),
+    )  # fmt: skip
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    after = json.loads(resumed.stdout.strip().splitlines()[-1])
+    replay = subprocess.run(
+        search_command(tmp_path / "replay", "--replay", str(folder), *multi),
+        capture_output=True, text=True, timeout=900, env=environment(),
+    )  # fmt: skip
+    assert replay.returncode == 0, replay.stderr[-3000:]
+    replayed = json.loads(replay.stdout.strip().splitlines()[-1])
+    assert after["top"] == replayed["top"]
+    # only the promoted law and the seed were fitted in full (then the rejected, invalid)
+    assert [entry["candidate"] for entry in after["top"]][:2] == ["01-exploit-00", "00-seed"]
+    assert [entry["valid"] for entry in after["top"]] == [True, True, False]
+    # the seed, two rejections, four screens and one full fit
+    assert after["evaluations"] == replayed["evaluations"] == 8
+    assert after["screened"] == replayed["screened"] == 4

@@ -57,6 +57,17 @@ def test_the_bar_shows_the_running_iteration_the_count_and_the_clock(width):
     assert "tokens" not in line and "$" not in line  # no model, no spend
 
 
+def test_a_screened_candidate_counts_once_and_its_screen_loss_is_not_the_best():
+    cfg = config(proposer="builtin", iterations=1, exploit=1, explore=1, fidelity="multi")
+    progress = SearchProgress(console(80), cfg)
+    screen = {"type": "screened", "fidelity": 0.2, "evaluation": {"valid": True, "loss": 0.01}}
+    feed(progress, {**evaluation_event(100.0), "candidate": "00-seed"},
+         {**screen, "candidate": "01-exploit-00"}, {**screen, "candidate": "01-explore-00"},
+         {**evaluation_event(50.0), "candidate": "01-explore-00"})  # fmt: skip
+    line = bar_line(progress, 80)
+    assert "3/3" in line and "best 50" in line
+
+
 def test_with_a_model_the_bar_shows_the_spend():
     cfg = config(proposer="openai/gpt-4o", iterations=4, exploit=1, explore=2)
     progress = SearchProgress(console(120), cfg)

@@ -70,6 +70,7 @@ def test_good_solution_is_evaluated_despite_its_prints():
         "learning_rate": 0.1,
         "seed": 7,
         "options": {"label": "seven", "notes": None},  # the fit worker's DoubleOptions
+        "fidelity": 1.0,
     }
     assert 0 < evaluation.extras["capture_seconds"] <= evaluation.seconds < 60
     assert evaluation.artifacts["captured"]["loss"] == 0.25  # what the fit was given
@@ -279,6 +280,21 @@ def test_pool_keeps_its_helpers_warm():
         first, second = pool.map(DOUBLE, ["loss = 1.0\n", "loss = 2.0\n"], SETTINGS)
     assert (first.loss, second.loss) == (1.0, 2.0)
     assert second.extras["capture_seconds"] < first.extras["capture_seconds"]
+
+
+def test_captured_data_is_fitted_again_at_another_fidelity_without_a_capture():
+    """A multi-fidelity search's promoted candidate: its screen's captured data, fitted in
+    full by the same warm fit worker; the solution does not run again."""
+    task = "tests.sga_agent.doubles:WarmingTask"  # reports its fit worker's process id
+    with SandboxPool(1, LIMITS, extra_python_path=[REPO_ROOT]) as pool:
+        screen = pool.submit(task, "loss = 1.0\n", EvaluationSettings(fidelity=0.2)).result()
+        captured = screen.artifacts["captured"]
+        full = pool.submit(task, "raise SystemExit('ran again')\n", SETTINGS,
+                           captured=captured).result()  # fmt: skip
+    assert (screen.extras["settings"]["fidelity"], full.extras["settings"]["fidelity"]) == (0.2, 1)
+    assert full.valid and full.loss == 1.0  # the screen's data, not the text's capture
+    assert full.extras["fit_pid"] == screen.extras["fit_pid"]
+    assert full.extras["capture_seconds"] < 0.05
 
 
 def test_a_pool_starts_its_idle_slots_once_its_first_capture_has_ended():
