@@ -46,6 +46,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "opro": {"iterations": 5, "top_k": 5, "exploit": 0, "explore": 16, "bilevel": False},
 }
 
+#: Iterations of a preset's search given a wall-time budget and no iteration count: as many
+#: as the budget allows (a bound no search reaches).
+UNTIL_BUDGET = 1_000_000
+
 #: Full fits only, or screens and full fits of the promoted (:class:`LoopConfig`).
 FIDELITIES = ("full", "multi")
 #: Where candidates are evaluated: this machine's process pool, or a Ray cluster.
@@ -352,7 +356,9 @@ class SearchConfig:
 
     @classmethod
     def from_preset(cls, preset: str, **settings: Any) -> SearchConfig:
-        """The preset's values, overridden by ``settings`` (flat names) that are not None."""
+        """The preset's values, overridden by ``settings`` (flat names) that are not None; with
+        a wall-time budget (``max_seconds``) and no ``iterations``, the search iterates until
+        the budget (:data:`UNTIL_BUDGET`)."""
         if preset not in PRESETS:
             close = difflib.get_close_matches(preset, PRESETS, n=1)
             hint = f" Did you mean {close[0]!r}?" if close else ""
@@ -360,6 +366,8 @@ class SearchConfig:
                 f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.{hint}"
             )
         values = {**PRESETS[preset], "preset": preset}
+        if settings.get("max_seconds") is not None and settings.get("iterations") is None:
+            values["iterations"] = UNTIL_BUDGET
         values.update({key: value for key, value in settings.items() if value is not None})
         return cls.from_settings(**values)
 

@@ -14,7 +14,7 @@ from rich.syntax import Syntax
 from rich.table import Table
 
 from sga_agent import events as ev
-from sga_agent.config import SearchConfig
+from sga_agent.config import UNTIL_BUDGET, SearchConfig
 from sga_agent.run_store import Recorded, RunStore
 from sga_agent.runner import BUILTIN, REPLAY_PREFIX
 from sga_agent.search import SEED, SearchResult
@@ -56,7 +56,8 @@ class SearchProgress:
         self.best = min((e.loss for e in done if e.valid), default=math.inf)
         self.failed = sum(not e.valid for e in done)
         self.screened = set(recorded.screens)  # candidates done once screened (multi-fidelity)
-        total = 1 + config.loop.iterations * config.loop.offspring
+        self.bounded = config.loop.iterations < UNTIL_BUDGET  # else the time budget ends it
+        total = 1 + config.loop.iterations * config.loop.offspring if self.bounded else None
         description = "resuming" if done else "seed"
         completed = len(recorded.evaluations.keys() | recorded.screens.keys())
         self.bar = self.progress.add_task(
@@ -87,7 +88,9 @@ class SearchProgress:
             self.failed += 1
             self.progress.advance(self.bar)
         elif kind == ev.IterationStarted.type:
-            description = f"iteration {event['iteration']}/{self.config.loop.iterations}"
+            description = f"iteration {event['iteration']}"
+            if self.bounded:
+                description += f"/{self.config.loop.iterations}"
             self.progress.update(self.bar, description=description)
         elif kind == ev.RunFinished.type:
             self.progress.update(self.bar, description="done")

@@ -85,7 +85,8 @@ def from_preset(name: str) -> str:
               show_default="sga with a model, quick without",
               help="Settings of a column of the paper's Table 1, or quick (overridden by the "
               "options).")
-@click.option("--iterations", type=click.IntRange(min=1), show_default=from_preset("iterations"),
+@click.option("--iterations", type=click.IntRange(min=1),
+              show_default=from_preset("iterations") + "; with --time-budget, until the budget",
               help="Outer iterations.")
 @click.option("--top-k", type=click.IntRange(min=1), show_default=from_preset("top_k"),
               help="Solutions shown per prompt (K).")
@@ -146,7 +147,8 @@ def from_preset(name: str) -> str:
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
 @click.option("--time-budget", "max_seconds", type=Duration(),
               help="Budget in wall time, e.g. 15m or 1h30m (a resume counts the time the run "
-              "already took). No evaluation starts after it; those running finish.")
+              "already took). No evaluation starts after it; those running finish. Without "
+              "--iterations the search iterates until it.")
 @click.option("--seed", type=int, default=default("seed"), show_default=True,
               help="Seed of the run.")
 @click.option("--out-dir", "out", type=click.Path(file_okay=False, path_type=Path),

@@ -13,6 +13,7 @@ import pytest
 from sga_agent.config import (
     FORMAT,
     SETTINGS,
+    UNTIL_BUDGET,
     Budgets,
     ConfigError,
     ExecutorConfig,
@@ -69,6 +70,14 @@ def test_presets_give_their_values_and_settings_that_are_not_none_win():
     assert (config.loop.iterations, config.loop.explore, config.fit.epochs) == (4, 9, 5)
     assert config.preset == "quick"
     assert SearchConfig.from_preset("no-bilevel", task="t", proposer="x").fit.bilevel is False
+
+
+def test_a_time_budget_without_an_iteration_count_iterates_until_the_budget():
+    timed = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0)
+    assert (timed.loop.iterations, timed.budgets.max_seconds) == (UNTIL_BUDGET, 900.0)
+    counted = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0,
+                                       iterations=3)  # fmt: skip
+    assert counted.loop.iterations == 3
 
 
 @pytest.mark.parametrize(

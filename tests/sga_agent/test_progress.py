@@ -11,6 +11,7 @@ import pytest
 from rich.console import Console
 
 from sga_agent.cli.progress import SearchProgress, print_result
+from sga_agent.config import UNTIL_BUDGET
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search, Totals
 from sga_agent.task import Evaluation
@@ -55,6 +56,14 @@ def test_the_bar_shows_the_running_iteration_the_count_and_the_clock(width):
     line = bar_line(progress, width)
     assert "3/13" in line and "best 3.5" in line and "failed 1" in line
     assert "tokens" not in line and "$" not in line  # no model, no spend
+
+
+def test_a_search_until_its_time_budget_shows_no_iteration_total():
+    cfg = config(proposer="builtin", iterations=UNTIL_BUDGET, exploit=1, explore=2)
+    progress = SearchProgress(console(80), cfg)
+    feed(progress, evaluation_event(1.0), {"type": "iteration_started", "iteration": 7})
+    line = bar_line(progress, 80)
+    assert line.startswith("iteration 7 ") and str(UNTIL_BUDGET) not in line
 
 
 def test_a_screened_candidate_counts_once_and_its_screen_loss_is_not_the_best():
