@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sga_agent.config import UNTIL_BUDGET
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "discovery.jsonl"
 LAWS = ROOT / "examples" / "laws"
@@ -124,8 +126,9 @@ def search(row: Row, options: dict[str, str], seed: int, budget: str, tree: Path
     """One default search with the code of checkout ``tree``: its summary and wall time."""
     path = os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")])
     env = os.environ | {"PYTHONPATH": path}
+    # given explicitly: a checkout from before UNTIL_BUDGET stops after its preset's iterations
     command = [sys.executable, "-m", "sga_agent", "search", "--task", row.task, "--seed",
-               str(seed), "--time-budget", budget, "--json"]  # fmt: skip
+               str(seed), "--time-budget", budget, "--iterations", str(UNTIL_BUDGET), "--json"]  # fmt: skip
     for key, value in options.items():
         command += ["--option", f"{key}={value}"]
     load = os.getloadavg()[0]
