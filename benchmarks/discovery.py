@@ -128,7 +128,8 @@ def search(row: Row, options: dict[str, str], seed: int, budget: str, tree: Path
     env = os.environ | {"PYTHONPATH": path}
     # given explicitly: a checkout from before UNTIL_BUDGET stops after its preset's iterations
     command = [sys.executable, "-m", "sga_agent", "search", "--task", row.task, "--seed",
-               str(seed), "--time-budget", budget, "--iterations", str(UNTIL_BUDGET), "--json"]  # fmt: skip
+               str(seed), "--time-budget", budget, "--iterations", str(UNTIL_BUDGET),
+               "--json"]  # fmt: skip
     for key, value in options.items():
         command += ["--option", f"{key}={value}"]
     load = os.getloadavg()[0]
