@@ -13,7 +13,8 @@ chosen by large tournaments; at the explore temperature (1.0 and above) mostly s
 replacement, crossover and fresh random laws from parents chosen by pairs. In between, the
 weights are interpolated. Perturbations grow with temperature too. A child made by changing
 structure must have a form (:mod:`.canonical`) new to its parents and its batch; in plastic
-search few children only move constants, and none when exploring.
+search few children only move constants (some restart a form's fit from new starting values),
+and none when exploring.
 """
 
 from __future__ import annotations
@@ -33,13 +34,14 @@ from tasks.constitutive.gp.variation import OPERATORS
 
 LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
 #: Operator weights at the exploit (low) and explore (high) temperature.
-EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "swap_op": 2.0, "add_term": 1.0, "drop_term": 1.0,
-           "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
-EXPLORE = {"perturb": 1.0, "rescale": 1.0, "swap_op": 1.0, "add_term": 1.0, "drop_term": 0.5,
-           "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
+EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "restart": 0.0, "swap_op": 2.0, "add_term": 1.0,
+           "drop_term": 1.0, "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
+EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "add_term": 1.0,
+           "drop_term": 0.5, "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
 #: In plastic search, moves of constants alone are few (none when exploring): the fit moves
-#: them anyway, and at 40 evaluations new forms paid more (``benchmarks/gp_search.py``).
-PLASTIC_CONSTANT_MOVES = {LOW: {"perturb": 1.0, "rescale": 0.5},
+#: them anyway, and at 40 evaluations new forms paid more; of those few, some restart a form's
+#: fit from new starting values (``benchmarks/gp_search.py``).
+PLASTIC_CONSTANT_MOVES = {LOW: {"perturb": 1.0, "rescale": 0.5, "restart": 1.0},
                           HIGH: {"perturb": 0.0, "rescale": 0.0}}  # fmt: skip
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
@@ -47,6 +49,7 @@ ATTEMPTS = 30  # tries for a child new to the parents and the batch
 DESCRIPTIONS = {
     "perturb": "moved one starting value of",
     "rescale": "scaled every term's coefficient of",
+    "restart": "drew new starting values for",
     "swap_op": "swapped one operation of",
     "add_term": "added a random term to",
     "drop_term": "dropped a term of",
@@ -55,7 +58,7 @@ DESCRIPTIONS = {
     "fresh": "drew a new random law instead of varying",
 }
 #: Operators that move constants only; the others must give a form new to the parents and batch.
-CONSTANT_MOVES = ("perturb", "rescale")
+CONSTANT_MOVES = ("perturb", "rescale", "restart")
 
 
 @dataclass(frozen=True)

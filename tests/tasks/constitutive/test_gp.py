@@ -30,7 +30,7 @@ from tasks.constitutive.gp.genome import (
     random_genome,
     random_term,
 )
-from tasks.constitutive.gp.proposer import DESCRIPTIONS, operator_weights
+from tasks.constitutive.gp.proposer import CONSTANT_MOVES, DESCRIPTIONS, operator_weights
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 from tasks.constitutive.inner import scalar_parameters
@@ -101,6 +101,16 @@ def test_rescale_shifts_every_coefficient_by_one_step():
     }
     assert len(shifts) == 1 and shifts != {0.0}
     assert [t.expr for t in child.terms] == [t.expr for t in parent.terms]
+
+
+def test_restart_keeps_the_form_and_draws_every_start_again():
+    rng = random.Random(6)
+    parent = random_genome(rng, "plastic")
+    child = OPERATORS["restart"](rng, parent, parent, 1.0)
+    assert form(child) == form(parent)
+    old, new = [p.raw for _, _, p in params(parent)], [p.raw for _, _, p in params(child)]
+    assert all(a != b for a, b in zip(old, new, strict=True))
+    assert OPERATORS["restart"](rng, Genome("plastic"), parent, 1.0) is None
 
 
 def test_the_plastic_identity_returns_F():
@@ -365,7 +375,7 @@ def test_structural_children_are_new_forms(kind):
     pool = parents(kind, count=5)
     known = {form(g) for p in pool if (g := genome_from_code(p.code, kind)) is not None}
     answers = GeneticProgrammingProposer(kind).propose_from(pool, 1.0, 30, seed=3)
-    moves = (DESCRIPTIONS["perturb"], DESCRIPTIONS["rescale"])
+    moves = [DESCRIPTIONS[name] for name in CONSTANT_MOVES]
     structural = [a for a in answers if not any(move in a for move in moves)]
     forms = [form(genome_from_code(parse_response(a).code, kind)) for a in structural]
     assert len(forms) > 20 and len(set(forms)) == len(forms) and not known & set(forms)
