@@ -11,7 +11,10 @@ Temperature sets the mix of operators: at the exploit temperature (0.5 and below
 steps (perturbed starting values, a swapped operation, one term added or dropped) from parents
 chosen by large tournaments; at the explore temperature (1.0 and above) mostly subtree
 replacement, crossover and fresh random laws from parents chosen by pairs. In between, the
-weights are interpolated. Perturbations grow with temperature too.
+weights are interpolated. Perturbations grow with temperature too. A child made by changing
+structure must have a form (:mod:`.canonical`) new to its parents and its batch; in plastic
+search few children only move constants (some restart a form's fit from new starting values),
+and none when exploring.
 """
 
 from __future__ import annotations
@@ -23,23 +26,30 @@ from dataclasses import dataclass
 
 from sga_agent.task import Parent
 from tasks.constitutive.gp import grammar
+from tasks.constitutive.gp.canonical import Key, form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
 from tasks.constitutive.gp.genome import Genome, random_genome, to_json
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 
-#: Operator weights at the exploit (low) and explore (high) temperature.
-EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "swap_op": 2.0, "add_term": 1.0, "drop_term": 1.0,
-           "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
-EXPLORE = {"perturb": 1.0, "rescale": 1.0, "swap_op": 1.0, "add_term": 1.0, "drop_term": 0.5,
-           "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
 LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
+#: Operator weights at the exploit (low) and explore (high) temperature.
+EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "restart": 0.0, "swap_op": 2.0, "add_term": 1.0,
+           "drop_term": 1.0, "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
+EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "add_term": 1.0,
+           "drop_term": 0.5, "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
+#: In plastic search, moves of constants alone are few (none when exploring): the fit moves
+#: them anyway, and at 40 evaluations new forms paid more; of those few, some restart a form's
+#: fit from new starting values (``benchmarks/gp_search.py``).
+PLASTIC_CONSTANT_MOVES = {LOW: {"perturb": 1.0, "rescale": 0.5, "restart": 1.0},
+                          HIGH: {"perturb": 0.0, "rescale": 0.0}}  # fmt: skip
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
 DESCRIPTIONS = {
     "perturb": "moved one starting value of",
     "rescale": "scaled every term's coefficient of",
+    "restart": "drew new starting values for",
     "swap_op": "swapped one operation of",
     "add_term": "added a random term to",
     "drop_term": "dropped a term of",
@@ -47,6 +57,8 @@ DESCRIPTIONS = {
     "crossover": "crossed over",
     "fresh": "drew a new random law instead of varying",
 }
+#: Operators that move constants only; the others must give a form new to the parents and batch.
+CONSTANT_MOVES = ("perturb", "rescale", "restart")
 
 
 @dataclass(frozen=True)
@@ -60,9 +72,14 @@ def exploration(temperature: float) -> float:
     return min(max((temperature - LOW) / (HIGH - LOW), 0.0), 1.0)
 
 
-def operator_weights(temperature: float) -> dict[str, float]:
+def operator_weights(temperature: float, searched: str) -> dict[str, float]:
+    """Operator weights at ``temperature`` in a search of ``searched`` laws."""
+    low, high = dict(EXPLOIT), dict(EXPLORE)
+    if searched == "plastic":
+        low.update(PLASTIC_CONSTANT_MOVES[LOW])
+        high.update(PLASTIC_CONSTANT_MOVES[HIGH])
     x = exploration(temperature)
-    return {name: (1 - x) * EXPLOIT[name] + x * EXPLORE[name] for name in EXPLOIT}
+    return {name: (1 - x) * low[name] + x * high[name] for name in low}
 
 
 class GeneticProgrammingProposer:
@@ -90,10 +107,12 @@ class GeneticProgrammingProposer:
         if not pool:
             pool = [_Member(seed_genome(self.searched), math.inf)]
         seen = {to_json(member.genome) for member in pool}
+        forms = {form(member.genome) for member in pool}
         answers = []
         for _ in range(n):
-            child, note = self._child(rng, pool, temperature, seen)
+            child, note = self._child(rng, pool, temperature, seen, forms)
             seen.add(to_json(child))
+            forms.add(form(child))
             answers.append(_answer(law_code(child), note))
         return answers
 
@@ -104,9 +123,16 @@ class GeneticProgrammingProposer:
         return with_values(genome, parent.parameters)
 
     def _child(
-        self, rng: random.Random, pool: list[_Member], temperature: float, seen: set[str]
+        self,
+        rng: random.Random,
+        pool: list[_Member],
+        temperature: float,
+        seen: set[str],
+        forms: set[Key],
     ) -> tuple[Genome, str]:
-        weights = operator_weights(temperature)
+        """A child new to ``seen`` (genomes); unless it only moves constants, of a form new to
+        ``forms`` too (a form's constants are fitted anyway)."""
+        weights = operator_weights(temperature, self.searched)
         x = exploration(temperature)
         size = round((1 - x) * TOURNAMENT[LOW] + x * TOURNAMENT[HIGH])
         step = max(temperature, MIN_STEP_TEMPERATURE)
@@ -114,7 +140,9 @@ class GeneticProgrammingProposer:
             name = rng.choices(list(weights), list(weights.values()))[0]
             first, second = _tournament(rng, pool, size), _tournament(rng, pool, size)
             child = OPERATORS[name](rng, first.genome, second.genome, step)
-            if child is not None and to_json(child) not in seen:
+            if child is None or to_json(child) in seen:
+                continue
+            if name in CONSTANT_MOVES or form(child) not in forms:
                 losses = [first] if name != "crossover" else [first, second]
                 note = f"{DESCRIPTIONS[name]} the parent{'s' if len(losses) > 1 else ''} "
                 note += " and ".join(f"of loss {m.loss:.4g}" for m in losses)

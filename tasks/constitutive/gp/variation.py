@@ -130,6 +130,22 @@ def crossover(
     return _checked(graft_term(genome, index, site.path, rng.choice(donors)))
 
 
+def restart(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """The same form from new starting values, each drawn from its start range (a fit that
+    began where the loss is flat, a yield radius above every strain, say, gets another try)."""
+    found = params(genome)
+    if not found:
+        return None
+    for index, path, param in found:
+        if path is None:
+            low, high = grammar.TERM_INITIAL[genome.kind]
+        else:
+            low, high = grammar.TRANSFORMS[param.transform].initial
+        raw = round(rng.uniform(low, high), 4)
+        genome = with_param(genome, index, path, replace(param, raw=raw))
+    return genome
+
+
 def fresh(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
     """A new random genome (the parents are ignored)."""
     return random_genome(rng, genome.kind)
@@ -143,5 +159,6 @@ OPERATORS: dict[str, Operator] = {
     "drop_term": drop_term,
     "replace_subtree": replace_subtree,
     "crossover": crossover,
+    "restart": restart,
     "fresh": fresh,
 }
