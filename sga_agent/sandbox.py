@@ -513,7 +513,9 @@ class EvaluationSlot:
                 fitted = self._fitted(outcome, request, remaining)
             evaluation = _verdict(fitted)
         evaluation.seconds = time.monotonic() - start
-        evaluation.extras.setdefault("capture_seconds", round(captured_at - start, 3))
+        # to the millisecond below, never above the whole evaluation's seconds
+        capture_ms = math.floor(1000 * (captured_at - start))
+        evaluation.extras.setdefault("capture_seconds", capture_ms / 1000)
         if retried:
             evaluation.extras["retried"] = "; ".join(retried)
         return evaluation
