@@ -251,7 +251,8 @@ def test_search_help_writes_every_default_one_way():
     assert "Default:" not in help_text and not re.search(r"\[\d", help_text)
     assert f"[default: {SandboxConfig.timeout_s}; x>=1]" in help_text
     iterations = f"{PRESETS['sga']['iterations']} (sga), {PRESETS['quick']['iterations']} (quick)"
-    assert f"Outer iterations.  [default: ({iterations}); x>=1]" in help_text
+    until = "with --time-budget, until the budget"
+    assert f"Outer iterations.  [default: ({iterations}; {until}); x>=1]" in help_text
     assert "--out-dir DIRECTORY" in help_text and "--out " not in help_text
 
 
