@@ -104,8 +104,12 @@ class ConstitutiveTask(TaskBase):
         from tasks.constitutive.gp.codegen import GENOME_TAG
 
         lines = solution.splitlines(keepends=True)
-        untagged = "".join(line for line in lines if not line.startswith(GENOME_TAG))
-        return with_fitted_values(untagged, parameters)
+        kept = []
+        for index, line in enumerate(lines):
+            tag_above = index > 0 and lines[index - 1].startswith(GENOME_TAG)
+            if not line.startswith(GENOME_TAG) and not (tag_above and not line.strip()):
+                kept.append(line)  # the tag goes with the blank line that sets it off
+        return with_fitted_values("".join(kept), parameters)
 
     def provenance(self, options: ConstitutiveOptions) -> dict[str, Any]:
         """The ground truth in words, with its values."""

@@ -64,4 +64,5 @@ def test_the_task_drops_the_stale_genome_tag_of_a_gp_law():
     fitted = {name: value + 1.0 for name, value in parameter_values(code).items()}
     shown = GranularTask().solution_with_parameters(code, fitted)
     assert "# genome:" in code and "# genome:" not in shown
+    assert "\n\n\n\n" not in shown  # nor the blank line that set it off
     assert parameter_values(shown) == pytest.approx(fitted, rel=1e-7)
