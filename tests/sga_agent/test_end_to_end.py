@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -170,71 +171,81 @@ def test_the_end_of_a_searchs_screen_has_no_taichi_log_line(tmp_path):
     assert not TAICHI_LOG_LINE.search(screen), screen[-3000:]
 
 
+def events_in(log: Path) -> list[dict]:
+    """The events a run's log holds so far (a line being written is skipped)."""
+    events = []
+    for line in log.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
 def fitted_in_iteration_1(log: Path) -> int:
     """How many iteration-1 candidates the sandbox finished (rejections are stored at once)."""
     submitted = {"01-exploit-00", "01-exploit-01", "01-explore-01", "01-explore-02"}
-    fitted = 0
-    for line in log.read_text().splitlines():
-        try:
-            event = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # a line being written
-        fitted += event.get("type") == "evaluation" and event.get("candidate") in submitted
-    return fitted
+    return sum(e.get("type") == "evaluation" and e.get("candidate") in submitted
+               for e in events_in(log))  # fmt: skip
 
 
-@pytest.mark.heavy
-def test_killed_search_resumes_to_the_same_heap(tmp_path):
-    """kill -9 once the first evaluation of iteration 1 is stored, resume, compare with a
-    replayed run. Each evaluation is stored as it finishes, so the others are still running."""
+def screened_in_iteration_1(log: Path) -> int:
+    """How many iteration-1 screens the sandbox finished."""
+    return sum(event.get("type") == "screened" for event in events_in(log))
+
+
+def killed_once(folder: Path, counted: Callable[[Path], int], *args: str) -> Path:
+    """The events log of a search (``args`` added), SIGKILLed as soon as ``counted`` finds one
+    thing in that log (within 10 minutes, else the test fails)."""
     with ScriptedOpenAIServer(SCRIPT) as server:
         process = subprocess.Popen(
-            search_command(tmp_path / "killed", *model(server.url)),
+            search_command(folder, *model(server.url), *args),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment(),
             start_new_session=True,
         )  # fmt: skip
         events = None
         deadline = time.time() + 600
         while time.time() < deadline:
-            logs = list((tmp_path / "killed").glob("*/events.jsonl"))
-            if logs and fitted_in_iteration_1(logs[0]) >= 1:
+            logs = list(folder.glob("*/events.jsonl"))
+            if logs and counted(logs[0]) >= 1:
                 events = logs[0]
                 break
             time.sleep(0.05)
         os.killpg(process.pid, signal.SIGKILL)
         process.wait()
     assert events is not None, "the search never got to iteration 1"
-    folder = events.parent
-    assert not (folder / "summary.json").exists()
-    assert fitted_in_iteration_1(events) < 4, "the kill came after every evaluation finished"
+    return events
 
+
+def resumed_and_replayed(folder: Path, replay_folder: Path, *args: str) -> tuple[dict, dict]:
+    """The summaries of ``sga-agent resume`` of the killed run in ``folder`` and of a search
+    replaying its answers (``args`` added)."""
     resumed = subprocess.run(
         [sys.executable, "-m", "sga_agent", "resume", str(folder), "--json"],
         capture_output=True, text=True, timeout=900, env=environment(),
     )  # fmt: skip
     assert resumed.returncode == 0, resumed.stderr[-3000:]
-    after = json.loads(resumed.stdout.strip().splitlines()[-1])
-
     replay = subprocess.run(
-        search_command(tmp_path / "replay", "--replay", str(folder)),
+        search_command(replay_folder, "--replay", str(folder), *args),
         capture_output=True, text=True, timeout=900, env=environment(),
     )  # fmt: skip
     assert replay.returncode == 0, replay.stderr[-3000:]
-    replayed = json.loads(replay.stdout.strip().splitlines()[-1])
+    after = json.loads(resumed.stdout.strip().splitlines()[-1])
+    return after, json.loads(replay.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.heavy
+def test_killed_search_resumes_to_the_same_heap(tmp_path):
+    """kill -9 once the first evaluation of iteration 1 is stored, resume, compare with a
+    replayed run. Each evaluation is stored as it finishes, so the others are still running."""
+    events = killed_once(tmp_path / "killed", fitted_in_iteration_1)
+    folder = events.parent
+    assert not (folder / "summary.json").exists()
+    assert fitted_in_iteration_1(events) < 4, "the kill came after every evaluation finished"
+
+    after, replayed = resumed_and_replayed(folder, tmp_path / "replay")
     assert after["top"] == replayed["top"]
     assert after["evaluations"] == replayed["evaluations"] == 7
-
-
-def screened_in_iteration_1(log: Path) -> int:
-    """How many iteration-1 screens the sandbox finished."""
-    screened = 0
-    for line in log.read_text().splitlines():
-        try:
-            event = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # a line being written
-        screened += event.get("type") == "screened"
-    return screened
 
 
 @pytest.mark.slow
@@ -242,40 +253,13 @@ def test_killed_multi_fidelity_search_resumes_to_the_same_heap(tmp_path):
     """--fidelity multi: kill -9 once the first screen is stored, resume, compare with a
     replayed run; the four laws that run are screened, the best valid screen's fitted in full."""
     multi = ("--fidelity", "multi", "--screen-fidelity", "0.5", "--promote", "0.25")
-    with ScriptedOpenAIServer(SCRIPT) as server:
-        process = subprocess.Popen(
-            search_command(tmp_path / "killed", *model(server.url), *multi),
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment(),
-            start_new_session=True,
-        )  # fmt: skip
-        events = None
-        deadline = time.time() + 600
-        while time.time() < deadline:
-            logs = list((tmp_path / "killed").glob("*/events.jsonl"))
-            if logs and screened_in_iteration_1(logs[0]) >= 1:
-                events = logs[0]
-                break
-            time.sleep(0.05)
-        os.killpg(process.pid, signal.SIGKILL)
-        process.wait()
-    assert events is not None, "the search never got to iteration 1"
+    events = killed_once(tmp_path / "killed", screened_in_iteration_1, *multi)
     folder = events.parent
     assert screened_in_iteration_1(events) < 4, "the kill came after every screen finished"
     loop = json.loads((folder / "config.json").read_text())["config"]["loop"]
     assert (loop["fidelity"], loop["screen_fidelity"], loop["promote"]) == ("multi", 0.5, 0.25)
 
-    resumed = subprocess.run(
-        [sys.executable, "-m", "sga_agent", "resume", str(folder), "--json"],
-        capture_output=True, text=True, timeout=900, env=environment(),
-    )  # fmt: skip
-    assert resumed.returncode == 0, resumed.stderr[-3000:]
-    after = json.loads(resumed.stdout.strip().splitlines()[-1])
-    replay = subprocess.run(
-        search_command(tmp_path / "replay", "--replay", str(folder), *multi),
-        capture_output=True, text=True, timeout=900, env=environment(),
-    )  # fmt: skip
-    assert replay.returncode == 0, replay.stderr[-3000:]
-    replayed = json.loads(replay.stdout.strip().splitlines()[-1])
+    after, replayed = resumed_and_replayed(folder, tmp_path / "replay", *multi)
     assert after["top"] == replayed["top"]
     # only the promoted law and the seed were fitted in full (then the rejected, invalid)
     assert [entry["candidate"] for entry in after["top"]][:2] == ["01-exploit-00", "00-seed"]
