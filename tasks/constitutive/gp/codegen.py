@@ -42,6 +42,7 @@ class _Forward:
         self.params: list[tuple[str, Param, str]] = []  # name, leaf, meaning
         self.lines: list[str] = []
         self.needs: set[str] = set()
+        self.helpers: list[str] = []
         self.names: dict[tuple[Expr, str], str] = {}
 
     def param(self, leaf: Param, role: str = "k", meaning: str = "") -> str:
@@ -59,6 +60,7 @@ class _Forward:
             return self.names[key]
         op = grammar.OPS[value_type][expr.op]
         self.needs.update(op.needs)
+        self.helpers += [name for name in op.helpers if name not in self.helpers]
         if op.terminal:
             return op.template
         args = [self.value(child, arg) for child, arg in zip(expr.children, op.args, strict=True)]
@@ -76,6 +78,21 @@ class _Forward:
                 needed.update(grammar.PRELUDE[name][1])
         return [line for name, (line, _) in grammar.PRELUDE.items() if name in needed]
 
+    def helper_functions(self) -> list[str]:
+        """Source lines of the helper functions the operations call, in definition order."""
+        used = [name for name in grammar.HELPERS if name in self.helpers]
+        lines = []
+        for name in used:
+            lines += ["", "", *grammar.HELPERS[name].strip().split("\n")]
+        return lines
+
+
+_COEFFICIENT_MEANINGS = {
+    "log": "natural log of a modulus in Pa",
+    "sigmoid": "logit of the weight of a correction",
+    "unit": "weight of a correction, at most 1 (1: it replaces F)",
+}
+
 
 def _has_param(expr: Expr) -> bool:
     return isinstance(expr, Param) or any(_has_param(child) for child in expr.children)
@@ -86,11 +103,7 @@ def _walk(genome: Genome) -> tuple[_Forward, list[tuple[str, str]]]:
     body = _Forward()
     coefficients = []
     for term in genome.terms:
-        meaning = (
-            "natural log of a modulus in Pa"
-            if genome.kind == "elastic"
-            else "logit of the weight of a correction"
-        )
+        meaning = _COEFFICIENT_MEANINGS[term.coefficient.transform]
         coefficient = body.param(term.coefficient, grammar.TERM_NAME[genome.kind], meaning)
         coefficients.append((coefficient, body.value(term.expr, MATRIX)))
     return body, coefficients
@@ -133,6 +146,7 @@ def law_code(genome: Genome) -> str:
             "import torch.nn as nn",
             "",
             GENOME_TAG + to_json(genome),
+            *body.helper_functions(),
             "",
             "",
             "class Physics(nn.Module):",

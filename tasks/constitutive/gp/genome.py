@@ -212,7 +212,7 @@ def from_json(text: str) -> Genome:
         if kind not in grammar.KINDS:
             raise GenomeError(f"unknown kind {kind!r}")
         terms = tuple(
-            Term(_decode_param(coefficient, grammar.TERM_TRANSFORM[kind]), _decode(expr, MATRIX))
+            Term(_decode_param(coefficient, grammar.TERM_TRANSFORMS[kind]), _decode(expr, MATRIX))
             for coefficient, expr in data["terms"]
         )
     except (ValueError, KeyError, TypeError, IndexError, RecursionError) as error:
@@ -223,9 +223,9 @@ def from_json(text: str) -> Genome:
     return genome
 
 
-def _decode_param(data: list, transform: str | None = None) -> Param:
+def _decode_param(data: list, allowed: tuple[str, ...] | None = None) -> Param:
     name, raw = data
-    if name not in grammar.TRANSFORMS or (transform and name != transform):
+    if name not in grammar.TRANSFORMS or (allowed and name not in allowed):
         raise GenomeError(f"unexpected parameter transform {name!r}")
     if not isinstance(raw, int | float) or isinstance(raw, bool):
         raise GenomeError(f"parameter value {raw!r} is not a number")
@@ -234,7 +234,7 @@ def _decode_param(data: list, transform: str | None = None) -> Param:
 
 def _decode(data: list, value_type: str) -> Expr:
     if value_type in PARAM_TYPES:
-        return _decode_param(data, "sigmoid" if value_type == WEIGHT else None)
+        return _decode_param(data, ("sigmoid",) if value_type == WEIGHT else None)
     op = grammar.OPS[value_type].get(data[0])
     if op is None or len(data) != 1 + len(op.args):
         raise GenomeError(f"{data[0]!r} is no operation of type {value_type} with this arity")

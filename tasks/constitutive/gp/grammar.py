@@ -12,13 +12,21 @@ Parameter leaves (type ``K``, or ``W`` for a weight in (0, 1)) become ``nn.Param
 generated law. Each stores an unconstrained raw value behind a transform that keeps it of order
 one for the optimizer: ``log`` (the value is exp(raw): moduli, thresholds), ``sigmoid``
 (weights, ratios in (0, 1)), ``tanh`` (signed ratios in (-1, 1)) or ``linear`` (free
-coefficients).
+coefficients). A plastic term's weight is ``unit``, min(raw, 1): it reaches 1 exactly (the
+correction replaces F, as every textbook return mapping does), where a sigmoid only nears it
+with a vanishing gradient.
 
 Operations lift principal vectors back to matrices in three ways, with U, Vh the singular
 vectors of F: ``frame`` (U diag(p) Vh, so ``frame(sigma)`` is F), ``from_strain``
 (U diag(exp(p)) Vh, so ``from_strain(eps)`` is F: the way a return mapping rebuilds the
 corrected F from a principal strain) and ``spatial`` (U diag(p) U^T, symmetric: the way an
 isotropic law writes a Kirchhoff stress).
+Two operations are textbook return mappings of a principal strain, written once as helper
+functions of the generated module: ``cylinder`` (von Mises: the deviatoric part shortened to a
+radius) and ``cone`` (Drucker-Prager: a radius proportional to the compression, and no strain
+left under expansion). They are blocks the search may combine, never the answer it is given:
+their radius or slope is a subtree to find and fit like any other.
+
 Templates use ``{0}``, ``{1}``, ... for the children's values; the generated code gives every
 operation its own variable, so children are always atomic expressions.
 """
@@ -47,6 +55,7 @@ class Op:
     args: tuple[str, ...]
     template: str
     needs: tuple[str, ...] = ()
+    helpers: tuple[str, ...] = ()  # functions of :data:`HELPERS` the template calls
 
     @property
     def terminal(self) -> bool:
@@ -61,6 +70,27 @@ PRELUDE: dict[str, tuple[str, tuple[str, ...]]] = {
     "eye": ("eye = torch.eye(3, dtype=F.dtype).expand_as(F)  # (B, 3, 3)", ()),
     "J": ("J = torch.linalg.det(F).unsqueeze(-1)  # (B, 1)", ()),
     "log_J": ("log_J = torch.log(J.clamp(min=1e-6))  # (B, 1)", ("J",)),
+}
+
+#: Module-level functions of the generated code, by name, in the order they must be defined.
+HELPERS: dict[str, str] = {
+    "cylinder_return": '''
+def cylinder_return(strain: torch.Tensor, radius: torch.Tensor) -> torch.Tensor:
+    """Principal strain (B, 3) returned onto the cylinder of ``radius`` (B, 1) around the
+    hydrostatic axis: its deviatoric part shortened to at most that norm (von Mises)."""
+    mean = strain.mean(-1, keepdim=True)  # (B, 1)
+    deviatoric = strain - mean  # (B, 3)
+    norm = torch.sqrt((deviatoric**2).sum(-1, keepdim=True) + 1e-12)  # (B, 1)
+    return mean + deviatoric * (radius.clamp(min=0.0) / norm).clamp(max=1.0)  # (B, 3)
+''',
+    "cone_return": '''
+def cone_return(strain: torch.Tensor, slope: torch.Tensor) -> torch.Tensor:
+    """Principal strain (B, 3) returned onto the cone whose radius is ``slope`` (B, 1) times the
+    compression -tr(strain) (Drucker-Prager, no cohesion); under expansion, to the apex: 0."""
+    trace = strain.sum(-1, keepdim=True)  # (B, 1)
+    inside = cylinder_return(strain, -slope * trace)  # (B, 3)
+    return torch.where(trace >= 0, torch.zeros_like(strain), inside)  # (B, 3)
+''',
 }
 
 _NORM = "torch.sqrt(({0} ** 2).sum(-1, keepdim=True) + 1e-12)"
@@ -108,6 +138,10 @@ _OPS = [
     Op("dev", PRINCIPAL, (PRINCIPAL,), "{0} - {0}.mean(-1, keepdim=True)"),
     Op("vol", PRINCIPAL, (PRINCIPAL,), "{0}.mean(-1, keepdim=True).expand_as({0})"),
     Op("shrink", PRINCIPAL, (PRINCIPAL, SCALAR), _SHRINK),
+    Op("cylinder", PRINCIPAL, (PRINCIPAL, SCALAR), "cylinder_return({0}, {1})",
+       helpers=("cylinder_return",)),
+    Op("cone", PRINCIPAL, (PRINCIPAL, SCALAR), "cone_return({0}, {1})",
+       helpers=("cylinder_return", "cone_return")),
     Op("J", SCALAR, (), "J", ("J",)),
     Op("log_J", SCALAR, (), "log_J", ("log_J",)),
     Op("const", SCALAR, (PARAM,), "{0}.expand(F.shape[0], 1)"),
@@ -128,10 +162,12 @@ OPS: dict[str, dict[str, Op]] = {
 OP_WEIGHTS: dict[str, dict[tuple[str, str], float]] = {
     "elastic": {(MATRIX, "spatial"): 2.0, (MATRIX, "frame"): 0.5, (MATRIX, "from_strain"): 0.3,
                 (MATRIX, "blend"): 0.5, (PRINCIPAL, "eps"): 2.0, (PRINCIPAL, "exp"): 0.5,
-                (PRINCIPAL, "shrink"): 0.5},
-    "plastic": {(MATRIX, "from_strain"): 4.0, (MATRIX, "frame"): 0.5, (MATRIX, "spatial"): 0.2,
-                (MATRIX, "matmul"): 0.5, (PRINCIPAL, "eps"): 2.0, (PRINCIPAL, "sigma"): 0.5,
-                (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5},
+                (PRINCIPAL, "shrink"): 0.5, (PRINCIPAL, "cylinder"): 0.3,
+                (PRINCIPAL, "cone"): 0.3},
+    "plastic": {(MATRIX, "from_strain"): 8.0, (MATRIX, "frame"): 0.5, (MATRIX, "spatial"): 0.5,
+                (MATRIX, "matmul"): 0.5, (PRINCIPAL, "eps"): 3.0, (PRINCIPAL, "sigma"): 0.5,
+                (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5, (PRINCIPAL, "vol"): 1.5,
+                (PRINCIPAL, "cylinder"): 2.0, (PRINCIPAL, "cone"): 2.0, (SCALAR, "const"): 3.0},
 }  # fmt: skip
 
 
@@ -154,15 +190,19 @@ TRANSFORMS = {
     "tanh": Transform("atanh_", "torch.tanh(self.{})", "inverse tanh of a ratio in (-1, 1)",
                       (-1.5, 1.5), 0.4),
     "linear": Transform("", "self.{}", "a free coefficient", (-2.0, 2.0), 0.4),
+    "unit": Transform("", "self.{}.clamp(max=1.0)", "a weight, at most 1", (0.4, 1.4), 0.3),
 }  # fmt: skip
 #: Transforms of a ``K`` leaf and how often each is drawn; a ``W`` leaf is always a sigmoid.
 PARAM_TRANSFORMS = {"log": 0.35, "linear": 0.35, "tanh": 0.15, "sigmoid": 0.15}
 
 #: Raw starting range of each term's coefficient: the natural log of a modulus in Pa for
-#: elastic laws (soft solids, about 3e3 to 1e6 Pa), the logit of a correction's weight for
-#: plastic laws.
-TERM_INITIAL = {"elastic": (8.0, 14.0), "plastic": (-1.0, 3.0)}
-TERM_TRANSFORM = {"elastic": "log", "plastic": "sigmoid"}
+#: elastic laws (soft solids, about 3e3 to 1e6 Pa), a correction's weight for plastic laws
+#: (from 1.0 up, the correction replaces F).
+TERM_INITIAL = {"elastic": (8.0, 14.0), "plastic": (0.4, 1.4)}
+TERM_TRANSFORM = {"elastic": "log", "plastic": "unit"}
+#: Transforms a term's coefficient may have when read back: the current one first, then
+#: those of earlier releases (a plastic weight was a sigmoid), so older runs still resume.
+TERM_TRANSFORMS = {"elastic": ("log",), "plastic": ("unit", "sigmoid")}
 TERM_NAME = {"elastic": "modulus", "plastic": "weight"}
 
 

@@ -34,9 +34,11 @@ from tasks.constitutive.gp.variation import OPERATORS
 
 LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
 #: Operator weights at the exploit (low) and explore (high) temperature.
-EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "restart": 0.0, "swap_op": 2.0, "add_term": 1.0,
+EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "restart": 0.0, "swap_op": 2.0, "reshape_op": 1.5,
+           "add_term": 1.0,
            "drop_term": 1.0, "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
-EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "add_term": 1.0,
+EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "reshape_op": 1.5,
+           "add_term": 1.0,
            "drop_term": 0.5, "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
 #: In plastic search, moves of constants alone are few (none when exploring): the fit moves
 #: them anyway, and at 40 evaluations new forms paid more; of those few, some restart a form's
@@ -51,6 +53,7 @@ DESCRIPTIONS = {
     "rescale": "scaled every term's coefficient of",
     "restart": "drew new starting values for",
     "swap_op": "swapped one operation of",
+    "reshape_op": "changed one operation's arity in",
     "add_term": "added a random term to",
     "drop_term": "dropped a term of",
     "replace_subtree": "replaced a subtree of",

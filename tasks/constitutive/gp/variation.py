@@ -16,6 +16,7 @@ from tasks.constitutive.gp.genome import (
     MAX_DEPTH,
     Genome,
     Node,
+    Param,
     fits,
     graft_term,
     params,
@@ -28,7 +29,10 @@ from tasks.constitutive.gp.genome import (
 
 Operator = Callable[[random.Random, Genome, Genome, float], Genome | None]
 REPLACEMENT_DEPTH = 4  # depth budget of a subtree drawn to replace another
-RESCALE_SPREAD = 1.5  # standard deviation of a rescaling step at temperature 1
+RESHAPE_DEPTH = 2  # depth budget of the new arguments of a reshaped operation
+#: Standard deviation of a rescaling step at temperature 1, by the coefficient's transform (a
+#: weight capped at 1 moves on its own scale, logs and logits on theirs).
+RESCALE_SPREAD = {"log": 1.5, "sigmoid": 1.5, "unit": 0.3}
 ADOPTION = 0.3  # chance that crossover adopts a whole term of the other parent
 
 
@@ -48,16 +52,16 @@ def perturb(rng: random.Random, genome: Genome, other: Genome, temperature: floa
 
 def rescale(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
     """Shift every term's coefficient by one Gaussian step: a stiffer or softer elastic law
-    (all moduli times one factor), or stronger or weaker plastic corrections (all logits)."""
+    (all moduli times one factor), or stronger or weaker plastic corrections (all weights)."""
     if not genome.terms:
         return None
-    step = rng.gauss(0.0, RESCALE_SPREAD * temperature)
-    terms = tuple(
-        replace(
-            term, coefficient=replace(term.coefficient, raw=round(term.coefficient.raw + step, 4))
-        )
-        for term in genome.terms
-    )
+    step = rng.gauss(0.0, temperature)
+
+    def shifted(coefficient: Param) -> Param:
+        raw = coefficient.raw + step * RESCALE_SPREAD[coefficient.transform]
+        return replace(coefficient, raw=round(raw, 4))
+
+    terms = tuple(replace(term, coefficient=shifted(term.coefficient)) for term in genome.terms)
     return replace(genome, terms=terms)
 
 
@@ -76,6 +80,37 @@ def swap_op(rng: random.Random, genome: Genome, other: Genome, temperature: floa
     assert isinstance(site.expr, Node)
     swapped = Node(rng.choice(names), site.expr.children)
     return _checked(graft_term(genome, index, site.path, swapped))
+
+
+def reshape_op(
+    rng: random.Random, genome: Genome, other: Genome, temperature: float
+) -> Genome | None:
+    """Replace one operation by another of its type whose first argument has the type of its
+    first child, keeping that child and drawing the other arguments afresh (vol(eps) becomes
+    cylinder(eps, r) or add(eps, x)): a step between forms of different arity."""
+    choices = []
+    for i, term in enumerate(genome.terms):
+        for site in sites(term.expr):
+            if not isinstance(site.expr, Node) or not site.expr.children:
+                continue
+            first = grammar.OPS[site.value_type][site.expr.op].args[0]
+            names = [
+                op.name
+                for op in grammar.OPS[site.value_type].values()
+                if op.args and op.args[0] == first and op.name != site.expr.op
+            ]
+            if names:
+                choices.append((i, site, names))
+    if not choices:
+        return None
+    index, site, names = rng.choice(choices)
+    assert isinstance(site.expr, Node)
+    weights = [grammar.weight(genome.kind, site.value_type, name) for name in names]
+    op = grammar.OPS[site.value_type][rng.choices(names, weights)[0]]
+    budget = min(RESHAPE_DEPTH, MAX_DEPTH - site.depth)
+    rest = [random_expr(rng, arg, budget, genome.kind) for arg in op.args[1:]]
+    reshaped = Node(op.name, (site.expr.children[0], *rest))
+    return _checked(graft_term(genome, index, site.path, reshaped))
 
 
 def add_term(
@@ -137,7 +172,7 @@ def restart(rng: random.Random, genome: Genome, other: Genome, temperature: floa
     if not found:
         return None
     for index, path, param in found:
-        if path is None:
+        if path is None and param.transform == grammar.TERM_TRANSFORM[genome.kind]:
             low, high = grammar.TERM_INITIAL[genome.kind]
         else:
             low, high = grammar.TRANSFORMS[param.transform].initial
@@ -155,6 +190,7 @@ OPERATORS: dict[str, Operator] = {
     "perturb": perturb,
     "rescale": rescale,
     "swap_op": swap_op,
+    "reshape_op": reshape_op,
     "add_term": add_term,
     "drop_term": drop_term,
     "replace_subtree": replace_subtree,
