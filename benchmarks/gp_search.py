@@ -2,11 +2,12 @@
 
 ``proxy``: the search loop of ``sga-agent search`` (the seed, then per iteration the top-K as
 parents, --exploit children at 0.5 and --explore at 1.0, the search's proposal seeds) with the
-simulation replaced by a regression on the true return mapping: trial deformation gradients F
-near the identity (spread 0.15, half of them compressed by 10%), a law's constants fitted by
-L-BFGS (6 evaluations, as the quick preset's fit) to the true law's corrected F
-(``examples/laws``), the loss the mean squared error relative to the identity's (the seed
-scores 1, the true law 0). Seconds per run, so many seeds. It does not model instability.
+simulation replaced by a regression on the true law: trial deformation gradients F near the
+identity (spread 0.15, half of them compressed by 10%), a law's constants fitted by L-BFGS (6
+evaluations, as the quick preset's fit) to the true law's corrected F, or for ``elastic`` its
+Kirchhoff stress (``examples/laws``); the loss is the mean squared error relative to the
+identity's, or to a zero stress's (the plastic seed scores 1, the true law 0). Seconds per run,
+so many seeds. It does not model instability.
 
 ``search``: ``sga-agent search`` itself with a fixed budget (the quick preset), reporting the
 best loss over the true law's (the run's ``summary.json``). Minutes per evaluation.
@@ -40,7 +41,9 @@ from tasks.constitutive.gp import GeneticProgrammingProposer
 from tasks.constitutive.law_code import load_law
 
 TRUTHS = {"plasticine": "von_mises.py", "granular": "drucker_prager.py", "fluid": "fluid.py",
-          "imaginary": "mixture.py"}  # fmt: skip
+          "imaginary": "mixture.py", "elastic": "neo_hookean.py"}  # fmt: skip
+#: What each task's law maps: F to the Kirchhoff stress, or F to the corrected F.
+SEARCHED = {task: "elastic" if task == "elastic" else "plastic" for task in TRUTHS}
 #: Loss and gradient evaluations of a fit, as the quick preset's 5 L-BFGS epochs take.
 FIT_EVALUATIONS = 6
 QUICK = {"iterations": 4, "top_k": 5, "exploit": 2, "explore": 4}
@@ -57,14 +60,17 @@ def samples(seed: int = 0, batch: int = 256) -> torch.Tensor:
 
 
 class Proxy:
-    """Scores law code by the regression on one task's true return mapping."""
+    """Scores law code by the regression on one task's true law: the corrected F of a plastic
+    law, relative to the identity's error (no correction), or the Kirchhoff stress of an
+    elastic one, relative to the zero stress's error."""
 
     def __init__(self, task: str) -> None:
         truth = load_law((Path("examples/laws") / TRUTHS[task]).read_text(), torch.float64)
         self.F = samples()
         with torch.no_grad(), stable_linalg():
             self.target = truth(self.F)
-        self.scale = ((self.F - self.target) ** 2).mean().item()
+        reference = self.F if SEARCHED[task] == "plastic" else torch.zeros_like(self.target)
+        self.scale = ((reference - self.target) ** 2).mean().item()
 
     def loss(self, code: str) -> tuple[float, dict[str, float]]:
         """Fitted relative loss and the fitted raw parameters (inf when the law fails)."""
@@ -97,8 +103,10 @@ class Proxy:
 def proxy_run(task: str, seed: int, budget: int, loop: dict[str, int]) -> float:
     """Best relative loss of one proxy search of ``budget`` evaluations (seed included)."""
     proxy = Proxy(task)
-    proposer = GeneticProgrammingProposer("plastic")
-    heap = [Parent(prompt_text.PLASTIC_SEED, 1.0, {})]
+    proposer = GeneticProgrammingProposer(SEARCHED[task])
+    elastic = SEARCHED[task] == "elastic"
+    seed_code = prompt_text.ELASTIC_SEED if elastic else prompt_text.PLASTIC_SEED
+    heap = [Parent(seed_code, *proxy.loss(seed_code))]
     evaluations = 1
     for iteration in range(1, loop["iterations"] + 1):
         parents = sorted(heap, key=lambda p: p.loss)[: loop["top_k"]]

@@ -2,7 +2,8 @@
 
 Every expression has a value type, named for its shape in the generated code:
 
-- ``M``: a matrix per particle, (B, 3, 3): F, the identity, the rotation R of F, and what
+- ``M``: a matrix per particle, (B, 3, 3): F, the identity, the rotation R of F, the left
+  Cauchy-Green tensor b = F F^T (the strain of isotropic hyperelasticity), and what
   transposes, sums, products, deviatoric and volumetric parts make of them;
 - ``P``: a principal vector per particle, (B, 3), along the singular directions of F: the
   singular values, the Hencky strain (their logarithms) and what is built from them;
@@ -67,6 +68,7 @@ PRELUDE: dict[str, tuple[str, tuple[str, ...]]] = {
     "svd": ("U, sigma, Vh = torch.linalg.svd(F)  # (B, 3, 3), (B, 3), (B, 3, 3)", ()),
     "eps": ("eps = torch.log(sigma.abs().clamp(min=1e-2))  # Hencky strain (B, 3)", ("svd",)),
     "R": ("R = U @ Vh  # rotation of F (B, 3, 3)", ("svd",)),
+    "b": ("b = F @ F.transpose(-2, -1)  # left Cauchy-Green tensor (B, 3, 3)", ()),
     "eye": ("eye = torch.eye(3, dtype=F.dtype).expand_as(F)  # (B, 3, 3)", ()),
     "J": ("J = torch.linalg.det(F).unsqueeze(-1)  # (B, 1)", ()),
     "log_J": ("log_J = torch.log(J.clamp(min=1e-6))  # (B, 1)", ("J",)),
@@ -122,6 +124,7 @@ _OPS = [
     Op("F", MATRIX, (), "F"),
     Op("I", MATRIX, (), "eye", ("eye",)),
     Op("R", MATRIX, (), "R", ("R",)),
+    Op("b", MATRIX, (), "b", ("b",)),
     *_arithmetic(MATRIX),
     Op("T", MATRIX, (MATRIX,), "{0}.transpose(-2, -1)"),
     Op("matmul", MATRIX, (MATRIX, MATRIX), "{0} @ {1}"),
@@ -158,16 +161,18 @@ OPS: dict[str, dict[str, Op]] = {
 }
 
 #: How often random generation picks an operation (default 1), per kind of law searched:
-#: principal-space stresses for elastic laws, strain corrections rebuilt into F for plastic ones.
+#: stresses of b, J and principal strains for elastic laws, strain corrections rebuilt into F
+#: for plastic ones.
 OP_WEIGHTS: dict[str, dict[tuple[str, str], float]] = {
-    "elastic": {(MATRIX, "spatial"): 2.0, (MATRIX, "frame"): 0.5, (MATRIX, "from_strain"): 0.3,
-                (MATRIX, "blend"): 0.5, (PRINCIPAL, "eps"): 2.0, (PRINCIPAL, "exp"): 0.5,
-                (PRINCIPAL, "shrink"): 0.5, (PRINCIPAL, "cylinder"): 0.3,
-                (PRINCIPAL, "cone"): 0.3},
+    "elastic": {(MATRIX, "b"): 2.0, (MATRIX, "spatial"): 2.0, (MATRIX, "frame"): 0.5,
+                (MATRIX, "from_strain"): 0.3, (MATRIX, "blend"): 0.5, (PRINCIPAL, "eps"): 2.0,
+                (PRINCIPAL, "exp"): 0.5, (PRINCIPAL, "shrink"): 0.5, (PRINCIPAL, "cylinder"): 0.3,
+                (PRINCIPAL, "cone"): 0.3, (SCALAR, "log_J"): 1.5},
     "plastic": {(MATRIX, "from_strain"): 8.0, (MATRIX, "frame"): 0.5, (MATRIX, "spatial"): 0.5,
-                (MATRIX, "matmul"): 0.5, (PRINCIPAL, "eps"): 3.0, (PRINCIPAL, "sigma"): 0.5,
-                (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5, (PRINCIPAL, "vol"): 1.5,
-                (PRINCIPAL, "cylinder"): 2.0, (PRINCIPAL, "cone"): 2.0, (SCALAR, "const"): 3.0},
+                (MATRIX, "matmul"): 0.5, (MATRIX, "b"): 0.3, (PRINCIPAL, "eps"): 3.0,
+                (PRINCIPAL, "sigma"): 0.5, (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5,
+                (PRINCIPAL, "vol"): 1.5, (PRINCIPAL, "cylinder"): 2.0, (PRINCIPAL, "cone"): 2.0,
+                (SCALAR, "const"): 3.0},
 }  # fmt: skip
 
 
