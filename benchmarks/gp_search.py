@@ -107,6 +107,7 @@ def proxy_run(task: str, seed: int, budget: int, loop: dict[str, int]) -> float:
     elastic = SEARCHED[task] == "elastic"
     seed_code = prompt_text.ELASTIC_SEED if elastic else prompt_text.PLASTIC_SEED
     heap = [Parent(seed_code, *proxy.loss(seed_code))]
+    tried: list[str] = []
     evaluations = 1
     for iteration in range(1, loop["iterations"] + 1):
         parents = sorted(heap, key=lambda p: p.loss)[: loop["top_k"]]
@@ -115,7 +116,9 @@ def proxy_run(task: str, seed: int, budget: int, loop: dict[str, int]) -> float:
             if n <= 0:
                 break
             call_seed = (seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
-            for answer in proposer.propose_from(parents, temperature, n, call_seed):
+            answers = proposer.propose_from(parents, temperature, n, call_seed, tried=tried)
+            tried += answers
+            for answer in answers:
                 code = parse_response(answer).code
                 loss, fitted = proxy.loss(code)
                 heap.append(Parent(code, loss, fitted))

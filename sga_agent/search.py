@@ -194,7 +194,8 @@ class Search:
             if self._budget_reached():
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
-            request = ProposalRequest(candidates, temperature, seed, parents, prompt)
+            tried = [self._answers[c]["text"] for c in sorted(self._answers)]
+            request = ProposalRequest(candidates, temperature, seed, parents, prompt, tried)
             new = self._ask(request)
             for candidate, proposal in zip(candidates, new, strict=False):
                 data = proposal.to_dict()

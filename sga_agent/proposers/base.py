@@ -77,6 +77,10 @@ class ProposalRequest:
     prompt : messages, or a callable returning them
         The chat messages for a model; a callable is called on the first :meth:`messages`
         only, so proposers that never read the prompt never pay for it.
+    tried : sequence of str
+        The answer texts of every earlier proposal of this run, oldest first (a resumed run
+        rebuilds them from its store): what a proposer without memory needs to try something
+        new rather than a parent's forgotten sibling.
     """
 
     candidates: Sequence[str]
@@ -84,6 +88,7 @@ class ProposalRequest:
     seed: int = 0
     parents: Sequence[Parent] = ()
     prompt: Messages | Callable[[], Messages] = field(default_factory=list)
+    tried: Sequence[str] = ()
     _built: Messages | None = field(default=None, init=False, repr=False)
 
     @property

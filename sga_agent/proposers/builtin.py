@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 from sga_agent.proposers.base import Proposal, ProposalRequest
 from sga_agent.task import BuiltinProposer
 
@@ -19,12 +21,20 @@ class BuiltinAdapter:
     def __init__(self, builtin: BuiltinProposer) -> None:
         self.builtin = builtin
 
+    def _reads_tried(self) -> bool:
+        """Whether the built-in proposer takes the run's earlier answers (``tried=``)."""
+        try:
+            return "tried" in inspect.signature(self.builtin.propose_from).parameters
+        except (TypeError, ValueError):
+            return False
+
     @property
     def name(self) -> str:
         return self.builtin.name
 
     def propose(self, request: ProposalRequest) -> list[Proposal]:
+        extra = {"tried": list(request.tried)} if self._reads_tried() else {}
         texts = self.builtin.propose_from(
-            list(request.parents), request.temperature, request.n, request.seed
+            list(request.parents), request.temperature, request.n, request.seed, **extra
         )
         return [Proposal(text, self.name, request.temperature) for text in texts[: request.n]]

@@ -68,8 +68,10 @@ class BuiltinProposer(Protocol):
     new solutions, each an answer text holding one ```python block. ``temperature`` is the
     search's exploit (low) or explore (high) temperature: low means small changes to good
     parents, high means bolder ones. Everything random derives from ``seed``, so a call with
-    the same arguments returns the same answers. The task options it is meant to run with are
-    the task's :attr:`TaskBase.builtin_options`.
+    the same arguments returns the same answers. A proposer whose ``propose_from`` also takes
+    a keyword ``tried`` is given the answer texts of every earlier proposal of the run (oldest
+    first), so it can avoid what was already evaluated; one without it works as before. The
+    task options it is meant to run with are the task's :attr:`TaskBase.builtin_options`.
     """
 
     name: str

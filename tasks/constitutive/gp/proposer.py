@@ -22,29 +22,33 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from sga_agent.task import Parent
 from tasks.constitutive.gp import grammar
 from tasks.constitutive.gp.canonical import Key, form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
-from tasks.constitutive.gp.genome import Genome, random_genome, to_json
+from tasks.constitutive.gp.enumeration import loose_form, small_forms
+from tasks.constitutive.gp.genome import Genome, Param, random_genome, to_json
 from tasks.constitutive.gp.seeds import seed_genome
-from tasks.constitutive.gp.variation import OPERATORS
+from tasks.constitutive.gp.variation import OPERATORS, restart
 
 LOW, HIGH = 0.5, 1.0  # temperatures of pure exploitation and pure exploration
 #: Operator weights at the exploit (low) and explore (high) temperature.
 EXPLOIT = {"perturb": 4.0, "rescale": 2.0, "restart": 0.0, "swap_op": 2.0, "reshape_op": 1.5,
-           "add_term": 1.0,
-           "drop_term": 1.0, "replace_subtree": 1.0, "crossover": 0.5, "fresh": 0.0}  # fmt: skip
+           "hoist": 1.0, "add_term": 1.0, "drop_term": 1.0, "replace_subtree": 1.0,
+           "crossover": 0.5, "fresh": 0.0}  # fmt: skip
 EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "reshape_op": 1.5,
-           "add_term": 1.0,
-           "drop_term": 0.5, "replace_subtree": 3.0, "crossover": 3.0, "fresh": 1.5}  # fmt: skip
+           "hoist": 1.0, "add_term": 1.0, "drop_term": 0.5, "replace_subtree": 3.0,
+           "crossover": 3.0, "fresh": 1.5}  # fmt: skip
 #: In plastic search, moves of constants alone are few (none when exploring): the fit moves
 #: them anyway, and at 40 evaluations new forms paid more; of those few, some restart a form's
 #: fit from new starting values (``benchmarks/gp_search.py``).
 PLASTIC_CONSTANT_MOVES = {LOW: {"perturb": 1.0, "rescale": 0.5, "restart": 1.0},
                           HIGH: {"perturb": 0.0, "rescale": 0.0}}  # fmt: skip
+#: Share of explore children that try the next untried small form (:mod:`.enumeration`)
+#: while there is one; none in elastic search, whose laws need two terms.
+ENUMERATION_SHARE = {"plastic": 0.75, "elastic": 0.0}
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
@@ -54,6 +58,7 @@ DESCRIPTIONS = {
     "restart": "drew new starting values for",
     "swap_op": "swapped one operation of",
     "reshape_op": "changed one operation's arity in",
+    "hoist": "replaced a subtree by one of its own subtrees in",
     "add_term": "added a random term to",
     "drop_term": "dropped a term of",
     "replace_subtree": "replaced a subtree of",
@@ -102,22 +107,52 @@ class GeneticProgrammingProposer:
         self.searched = searched
 
     def propose_from(
-        self, parents: Sequence[Parent], temperature: float, n: int, seed: int
+        self,
+        parents: Sequence[Parent],
+        temperature: float,
+        n: int,
+        seed: int,
+        tried: Sequence[str] = (),
     ) -> list[str]:
-        """``n`` answers, each one generated law in a python block; same inputs, same answers."""
+        """``n`` answers, each one generated law in a python block; same inputs, same answers.
+
+        ``tried`` holds the run's earlier answers: their forms count as known, so structural
+        children and the enumeration of small forms skip them."""
         rng = random.Random(seed)
         pool = [_Member(self._genome(p), _loss(p.loss)) for p in parents]
         if not pool:
             pool = [_Member(seed_genome(self.searched), math.inf)]
-        seen = {to_json(member.genome) for member in pool}
-        forms = {form(member.genome) for member in pool}
+        earlier = [g for text in tried if (g := genome_from_code(text, self.searched))]
+        known = [member.genome for member in pool] + earlier
+        seen = {to_json(genome) for genome in known}
+        forms = {form(genome) for genome in known}
+        listed = {loose_form(genome) for genome in known if len(genome.terms) == 1}
         answers = []
         for _ in range(n):
-            child, note = self._child(rng, pool, temperature, seen, forms)
+            child, note = self._next_small_form(rng, temperature, listed) or self._child(
+                rng, pool, temperature, seen, forms
+            )
             seen.add(to_json(child))
             forms.add(form(child))
+            if len(child.terms) == 1:
+                listed.add(loose_form(child))
             answers.append(_answer(law_code(child), note))
         return answers
+
+    def _next_small_form(
+        self, rng: random.Random, temperature: float, listed: set[Key]
+    ) -> tuple[Genome, str] | None:
+        """With a chance that grows with temperature (plastic search only), the most probable
+        small form not yet tried, from new starting values; None otherwise or when all are."""
+        share = exploration(temperature) * ENUMERATION_SHARE[self.searched]
+        if share <= 0 or rng.random() >= share:
+            return None
+        for rank, genome in enumerate(small_forms(self.searched), start=1):
+            if loose_form(genome) not in listed:
+                child = restart(rng, genome, genome, temperature)
+                assert child is not None
+                return child, f"tried small form {rank} in order of prior probability, untried"
+        return None
 
     def _genome(self, parent: Parent) -> Genome:
         genome = genome_from_code(parent.code, self.searched)
@@ -143,6 +178,8 @@ class GeneticProgrammingProposer:
             name = rng.choices(list(weights), list(weights.values()))[0]
             first, second = _tournament(rng, pool, size), _tournament(rng, pool, size)
             child = OPERATORS[name](rng, first.genome, second.genome, step)
+            if child is not None and self.searched == "plastic":
+                child = _fresh_weights(rng, child, (first.genome, second.genome))
             if child is None or to_json(child) in seen:
                 continue
             if name in CONSTANT_MOVES or form(child) not in forms:
@@ -151,6 +188,22 @@ class GeneticProgrammingProposer:
                 note += " and ".join(f"of loss {m.loss:.4g}" for m in losses)
                 return child, note
         return random_genome(rng, self.searched), "drew a new random law"
+
+
+def _fresh_weights(rng: random.Random, child: Genome, parents: tuple[Genome, ...]) -> Genome:
+    """``child`` with a new starting weight for every term whose correction no parent has: a
+    fitted weight belongs to its correction (a weight fitted near 0 for a poor correction
+    would otherwise start, and often stay, the better one it became)."""
+    known = {term.expr for parent in parents for term in parent.terms}
+    low, high = grammar.TERM_INITIAL["plastic"]
+    terms = tuple(
+        term
+        if term.expr in known
+        else replace(term, coefficient=Param(grammar.TERM_TRANSFORM["plastic"],
+                                             round(rng.uniform(low, high), 4)))  # fmt: skip
+        for term in child.terms
+    )
+    return replace(child, terms=terms)
 
 
 def _loss(value: float) -> float:

@@ -113,6 +113,22 @@ def reshape_op(
     return _checked(graft_term(genome, index, site.path, reshaped))
 
 
+def hoist(rng: random.Random, genome: Genome, other: Genome, temperature: float) -> Genome | None:
+    """Replace a subtree by one of its own proper subtrees of the same type (matmul(x, F^T)
+    becomes x): a smaller form, against bloat."""
+    choices = [
+        (i, site, inner)
+        for i, term in enumerate(genome.terms)
+        for site in sites(term.expr)
+        for inner in sites(site.expr, site.value_type)
+        if inner.path and inner.value_type == site.value_type and isinstance(inner.expr, Node)
+    ]
+    if not choices:
+        return None
+    index, site, inner = rng.choice(choices)
+    return _checked(graft_term(genome, index, site.path, inner.expr))
+
+
 def add_term(
     rng: random.Random, genome: Genome, other: Genome, temperature: float
 ) -> Genome | None:
@@ -191,6 +207,7 @@ OPERATORS: dict[str, Operator] = {
     "rescale": rescale,
     "swap_op": swap_op,
     "reshape_op": reshape_op,
+    "hoist": hoist,
     "add_term": add_term,
     "drop_term": drop_term,
     "replace_subtree": replace_subtree,

@@ -17,7 +17,7 @@ from sga_agent.registry import load_task
 from sga_agent.runner import task_options
 from sga_agent.task import BuiltinProposer, EvaluationSettings, Parent
 from tasks.constitutive import prompt_text
-from tasks.constitutive.gp import GeneticProgrammingProposer
+from tasks.constitutive.gp import GeneticProgrammingProposer, grammar
 from tasks.constitutive.gp.canonical import form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
 from tasks.constitutive.gp.genome import (
@@ -203,6 +203,13 @@ def hencky_reference():
     return genome, torch_laws.StVKHencky(E, NU, dtype=torch.float64)
 
 
+def neo_hookean_with_b():
+    genome, reference = neo_hookean_reference()
+    b_minus_identity = N("sub", N("b"), N("I"))
+    return Genome("elastic", (Term(genome.terms[0].coefficient, b_minus_identity),
+                              genome.terms[1])), reference  # fmt: skip
+
+
 def plastic_reference(name: str, *terms: tuple[Param, Node]):
     return Genome("plastic", tuple(Term(w, expr) for w, expr in terms)), example(name)
 
@@ -214,6 +221,11 @@ REFERENCES = {
     "von Mises": lambda: plastic_reference("von_mises.py", (certain(), VON_MISES)),
     "Drucker-Prager": lambda: plastic_reference("drucker_prager.py", (certain(), SAND)),
     "fluid": lambda: plastic_reference("fluid.py", (certain(), FLUID)),
+    "neo-Hookean with b": neo_hookean_with_b,
+    "von Mises block": lambda: plastic_reference("von_mises.py", (Param("unit", 1.0), N(
+        "from_strain", N("cylinder", EPS, N("const", log(3e4 / (2 * MU)))))),),
+    "Drucker-Prager block": lambda: plastic_reference("drucker_prager.py", (Param("unit", 1.2), N(
+        "from_strain", N("cone", EPS, N("const", log(SAND_SLOPE))))),),
     "mixture": lambda: plastic_reference(
         "mixture.py", (logit(0.5), VON_MISES), (logit(0.3), SAND), (logit(0.2), FLUID)
     ),
@@ -233,6 +245,74 @@ def test_the_grammar_expresses_the_laws_in_play(family):
     assert not torch.allclose(F, expected) or genome.kind == "elastic"  # plasticity is active
     # parameters start as float32 tensors, as in any law's code (torch.tensor(value))
     assert torch.allclose(found, expected, rtol=0, atol=1e-5 * expected.abs().max())
+
+
+def test_a_plastic_weight_reaches_one_and_stops_there():
+    """min(raw, 1): from 1 up the correction replaces F, and the fit no longer moves it."""
+    correction = N("from_strain", VOL)
+    replaced = load_law(law_code(Genome("plastic", (Term(Param("unit", 1.3), correction),))),
+                        torch.float64)  # fmt: skip
+    blended = load_law(law_code(Genome("plastic", (Term(Param("unit", 0.5), correction),))),
+                       torch.float64)  # fmt: skip
+    F = deformations(seed=5)
+    with stable_linalg():
+        full, half = replaced(F), blended(F)
+        full.sum().backward()
+    target = F + 2 * (half.detach() - F)  # half = F + 0.5 (G - F)
+    assert torch.allclose(full.detach(), target, atol=1e-12)
+    assert replaced.weight0.grad.item() == 0.0
+
+
+def test_genomes_of_earlier_releases_read_back():
+    """A plastic weight was a sigmoid before: such a genome still resumes, unchanged."""
+    old = Genome("plastic", (Term(Param("sigmoid", 2.0), N("from_strain", VOL)),))
+    code = law_code(old)
+    assert genome_from_code(code, "plastic") == old
+    assert "torch.sigmoid(self.logit_weight0)" in code
+
+
+def test_reshape_op_changes_arity_and_keeps_the_first_child():
+    rng = random.Random(2)
+    parent = Genome("plastic", (Term(Param("unit", 1.0), N("from_strain", VOL)),))
+    shapes = set()
+    for _ in range(40):
+        child = OPERATORS["reshape_op"](rng, parent, parent, 1.0)
+        if child is None:
+            continue
+        root = child.terms[0].expr
+        assert fits(child)
+        if root.op == "from_strain":  # the P site was reshaped: its first child kept
+            assert root.children[0].children[0] == EPS and root.children[0].op != "vol"
+            shapes.add(root.children[0].op)
+        else:  # the root was (frame or spatial): its child vol(eps) is kept
+            assert root.op in ("frame", "spatial") and root.children[0] == VOL
+    assert {"cylinder", "cone"} & shapes and len(shapes) > 3
+
+
+def test_the_blocks_return_onto_their_surfaces():
+    """cylinder: the deviatoric part's norm clamped to the radius, the mean kept; cone: the
+    radius is the slope times the compression, and expanded strain returns to 0."""
+    strain = 0.1 * torch.randn(200, 3, generator=torch.Generator().manual_seed(1),
+                               dtype=torch.float64)  # fmt: skip
+    helpers = {}
+    for source in grammar.HELPERS.values():
+        exec(compile("import torch\n" + source, "<helper>", "exec"), helpers)  # noqa: S102
+    radius = torch.full((200, 1), 0.05, dtype=torch.float64)
+    returned = helpers["cylinder_return"](strain, radius)
+    deviatoric = returned - returned.mean(-1, keepdim=True)
+    norms = deviatoric.norm(dim=-1)
+    original = (strain - strain.mean(-1, keepdim=True)).norm(dim=-1)
+    assert torch.allclose(returned.mean(-1), strain.mean(-1))
+    assert torch.allclose(norms, original.clamp(max=0.05), atol=1e-9)
+    slope = torch.full((200, 1), 0.5, dtype=torch.float64)
+    coned = helpers["cone_return"](strain, slope)
+    trace = strain.sum(-1)
+    assert torch.equal(coned[trace >= 0], torch.zeros_like(coned[trace >= 0]))
+    compressed = trace < 0
+    limit = (-0.5 * trace[compressed]).clamp(min=0)
+    coned_dev = coned - coned.mean(-1, keepdim=True)
+    assert (coned_dev.norm(dim=-1)[compressed] <= limit + 1e-9).all()
+    assert torch.allclose(coned.sum(-1)[compressed], trace[compressed])
 
 
 def test_trivial_and_wasteful_terms_are_not_proposed():
