@@ -23,6 +23,7 @@ with ``PYTHONPATH`` pointing at a worktree of an earlier commit. From the reposi
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import math
 import shlex
@@ -108,6 +109,7 @@ def proxy_run(task: str, seed: int, budget: int, loop: dict[str, int]) -> float:
     seed_code = prompt_text.ELASTIC_SEED if elastic else prompt_text.PLASTIC_SEED
     heap = [Parent(seed_code, *proxy.loss(seed_code))]
     tried: list[str] = []
+    remembers = "tried" in inspect.signature(proposer.propose_from).parameters
     evaluations = 1
     for iteration in range(1, loop["iterations"] + 1):
         parents = sorted(heap, key=lambda p: p.loss)[: loop["top_k"]]
@@ -116,7 +118,8 @@ def proxy_run(task: str, seed: int, budget: int, loop: dict[str, int]) -> float:
             if n <= 0:
                 break
             call_seed = (seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
-            answers = proposer.propose_from(parents, temperature, n, call_seed, tried=tried)
+            memory = {"tried": list(tried)} if remembers else {}  # an older proposer has none
+            answers = proposer.propose_from(parents, temperature, n, call_seed, **memory)
             tried += answers
             for answer in answers:
                 code = parse_response(answer).code

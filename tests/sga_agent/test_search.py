@@ -334,6 +334,50 @@ def test_a_builtin_proposer_gets_the_parents_and_no_prompt_is_built(tmp_path, mo
     assert proposal["model"] == "builtin:halving" and proposal["temperature"] == 0.5
 
 
+class Remembering(Halving):
+    """A built-in proposer double that takes the run's earlier answers (``tried=``)."""
+
+    name = "builtin:remembering"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tried: list[list[str]] = []
+
+    def propose_from(self, parents, temperature, n, seed, tried=()):
+        self.tried.append(list(tried))
+        return super().propose_from(parents, temperature, n, seed)
+
+
+def test_a_builtin_proposer_that_takes_tried_gets_every_earlier_answer(tmp_path):
+    """Oldest first, the current iteration's earlier batch included; a resumed run rebuilds
+    them from its store, so it asks with the same list the original did."""
+    cfg = config(iterations=2)
+    store = RunStore.create(tmp_path / "full", cfg, {})
+    builtin = Remembering()
+    Search(cfg, FakeTask(), BuiltinAdapter(builtin), LossInCode(), store).run()
+    answers = {p.parent.name: p.read_text()
+               for p in store.path.glob("candidates/*/response.txt")}  # fmt: skip
+    assert [len(t) for t in builtin.tried] == [0, 1, 3, 4]
+    assert builtin.tried[-1] == [answers[c] for c in sorted(answers)[:4]]
+    # killed before the last batch was asked for: cut the log at its first proposal
+    lines = (store.path / "events.jsonl").read_text().splitlines()
+    cut = next(i for i, line in enumerate(lines)
+               if '"type": "proposal"' in line and '"02-explore-00"' in line)  # fmt: skip
+    killed = RunStore.create(tmp_path / "killed", cfg, {})
+    with open(killed.path / "events.jsonl", "a") as log:
+        log.write("\n".join(lines[1:cut]) + "\n")
+    again = Remembering()
+    Search(cfg, FakeTask(), BuiltinAdapter(again), LossInCode(), killed).run()
+    assert again.tried == [builtin.tried[-1]]
+
+
+def test_a_builtin_proposer_without_tried_is_called_as_before(tmp_path):
+    cfg = config(iterations=2)
+    store = RunStore.create(tmp_path, cfg, {})
+    Search(cfg, FakeTask(), BuiltinAdapter(Halving()), LossInCode(), store).run()
+    assert len(list(store.path.glob("candidates/*/response.txt"))) == 6
+
+
 class Failing(Scripted):
     """Proposer double: answers from a list, then fails (transiently or for good)."""
 

@@ -244,14 +244,15 @@ def _decode(data: list, value_type: str) -> Expr:
 # ----------------------------------------------------------------------- random generation
 
 
-def random_param(rng: random.Random, value_type: str) -> Param:
-    """A parameter leaf for a ``K`` or ``W`` slot, its raw value drawn from its start range."""
+def random_param(rng: random.Random, value_type: str, kind: str) -> Param:
+    """A parameter leaf for a ``K`` or ``W`` slot of a ``kind`` law, its raw value drawn from
+    its start range."""
     if value_type == WEIGHT:
         transform = "sigmoid"
     else:
         names = list(grammar.PARAM_TRANSFORMS)
         transform = rng.choices(names, [grammar.PARAM_TRANSFORMS[n] for n in names])[0]
-    return Param(transform, round(rng.uniform(*grammar.TRANSFORMS[transform].initial), 4))
+    return Param(transform, round(rng.uniform(*grammar.initial(transform, kind)), 4))
 
 
 def random_expr(
@@ -260,7 +261,7 @@ def random_expr(
     """A random expression of ``value_type`` at most ``budget`` deep (the "grow" method), which
     stops early at a terminal with probability ``leaf`` at each level."""
     if value_type in PARAM_TYPES:
-        return random_param(rng, value_type)
+        return random_param(rng, value_type, kind)
     ops = list(grammar.OPS[value_type].values())
     if budget <= 2 or rng.random() < leaf:
         # an operation needs 2 levels, unless all its arguments are parameter leaves

@@ -198,6 +198,17 @@ TRANSFORMS = {
     "linear": Transform("", "self.{}", "a free coefficient", (-2.0, 2.0), 0.4),
     "unit": Transform("", "self.{}.clamp(max=1.0)", "a weight, at most 1", (0.4, 1.4), 0.3),
 }  # fmt: skip
+#: Start ranges that differ by the kind of law searched: a positive constant of a plastic law
+#: is mostly a strain-sized threshold or slope, so it starts below e^-2 = 0.135; one started
+#: above every strain of a scene (a yield radius no particle reaches) gets no gradient at all.
+KIND_INITIAL = {("plastic", "log"): (-5.0, -2.0)}
+
+
+def initial(transform: str, kind: str) -> tuple[float, float]:
+    """The raw start range of a ``transform`` parameter leaf in a ``kind`` law."""
+    return KIND_INITIAL.get((kind, transform), TRANSFORMS[transform].initial)
+
+
 #: Transforms of a ``K`` leaf and how often each is drawn; a ``W`` leaf is always a sigmoid.
 PARAM_TRANSFORMS = {"log": 0.35, "linear": 0.35, "tanh": 0.15, "sigmoid": 0.15}
 

@@ -191,7 +191,7 @@ def restart(rng: random.Random, genome: Genome, other: Genome, temperature: floa
         if path is None and param.transform == grammar.TERM_TRANSFORM[genome.kind]:
             low, high = grammar.TERM_INITIAL[genome.kind]
         else:
-            low, high = grammar.TRANSFORMS[param.transform].initial
+            low, high = grammar.initial(param.transform, genome.kind)
         raw = round(rng.uniform(low, high), 4)
         genome = with_param(genome, index, path, replace(param, raw=raw))
     return genome

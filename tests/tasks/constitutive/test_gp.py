@@ -5,6 +5,7 @@ by hand, never handed to the search), and proposals are reproducible."""
 import ast
 import math
 import random
+import re
 from pathlib import Path
 
 import pytest
@@ -20,6 +21,7 @@ from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer, grammar
 from tasks.constitutive.gp.canonical import form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
+from tasks.constitutive.gp.enumeration import loose_form, small_forms
 from tasks.constitutive.gp.genome import (
     Genome,
     Node,
@@ -517,3 +519,45 @@ def test_the_von_mises_form_is_reached_from_a_poor_start():
     assert result.status == "ok" and result.loss < seed.loss / 100
     radius = math.exp(next(v for k, v in result.parameters.items() if k.startswith("log_k")))
     assert radius == pytest.approx(3e4 / (2 * MU), rel=0.2)
+
+
+# ------------------------------------------------- enumeration and the run's memory
+
+
+def test_small_forms_are_distinct_nontrivial_and_hold_the_textbook_blocks():
+    listed = small_forms("plastic")
+    assert len(listed) == 40 and listed == small_forms("plastic")
+    assert len({loose_form(g) for g in listed}) == len(listed)
+    assert all(fits(g) and len(g.terms) == 1 for g in listed)
+    roots = [g.terms[0].expr for g in listed]
+    blocks = [e.children[0].op for e in roots if e.op == "from_strain" and e.children[0].children]
+    assert {"cylinder", "cone", "vol", "dev"} <= set(blocks)
+
+
+def test_explore_children_try_the_untried_small_forms_in_order():
+    proposer = GeneticProgrammingProposer("plastic")
+    seed = [Parent(prompt_text.PLASTIC_SEED, 1.0)]
+    first = proposer.propose_from(seed, 1.0, 12, seed=1)
+    second = proposer.propose_from(seed, 1.0, 12, seed=2, tried=first)
+    rank = re.compile(r"tried small form (\d+) in order")
+    ranks = [[int(m.group(1)) for a in batch if (m := rank.search(a))] for batch in (first, second)]
+    assert len(ranks[0]) >= 6 and ranks[0] == sorted(ranks[0]) and ranks[0][0] == 1
+    assert not set(ranks[0]) & set(ranks[1]) and min(ranks[1]) > max(ranks[0])
+    exploiting = proposer.propose_from(seed, 0.5, 12, seed=1)
+    assert not any(rank.search(a) for a in exploiting)
+    assert not any(rank.search(a) for a in GeneticProgrammingProposer("elastic").propose_from(
+        [Parent(prompt_text.ELASTIC_SEED, 1.0)], 1.0, 12, seed=1))  # fmt: skip
+
+
+def test_structural_children_are_new_to_the_whole_run():
+    """A form evaluated earlier (an answer in ``tried``) is not proposed again, even when no
+    parent has it any more."""
+    proposer = GeneticProgrammingProposer("plastic")
+    pool = parents("plastic")
+    earlier = proposer.propose_from(pool, 1.0, 30, seed=3)
+    known = {form(genome_from_code(parse_response(a).code, "plastic")) for a in earlier}
+    later = proposer.propose_from(pool, 1.0, 30, seed=4, tried=earlier)
+    moves = [DESCRIPTIONS[name] for name in CONSTANT_MOVES]
+    structural = [a for a in later if not any(move in a for move in moves)]
+    forms = {form(genome_from_code(parse_response(a).code, "plastic")) for a in structural}
+    assert len(structural) > 20 and not forms & known
