@@ -179,13 +179,14 @@ def run_row(args: argparse.Namespace) -> None:
     if row.observation:
         options |= observation_files(args.row, row)
     tree = Path(args.tree).resolve() if args.tree else ROOT
+    commit = _commit(tree)  # at the start: a commit made while the search runs is not its code
     found = search(row, options, args.seed, args.budget, tree)
     summary, findings = found["summary"], found["summary"].get("findings") or {}
     truth = fitted_truth(row, found["config"])
     best = (summary.get("best") or {}).get("loss")
     record = {
         "row": args.row, "seed": args.seed, "label": args.label, "budget": args.budget,
-        "commit": _commit(tree), "date": time.strftime("%Y-%m-%d %H:%M"),
+        "commit": commit, "date": time.strftime("%Y-%m-%d %H:%M"),
         "best": best, "seed_loss": (findings.get("seed") or {}).get("loss"),
         "truth": findings.get("truth_loss"), "fitted_truth": truth["loss"],
         "held_out": held_out_error(findings), "fitted_truth_held_out": truth["held_out"],
@@ -201,7 +202,9 @@ def run_row(args: argparse.Namespace) -> None:
 
 
 def _commit(tree: Path) -> str:
-    done = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
+    """The checkout's commit, marked ``-dirty`` where tracked files differ from it."""
+    done = subprocess.run(["git", "-C", str(tree), "describe", "--always", "--dirty",
+                           "--abbrev=7", "--exclude", "*"],
                           capture_output=True, text=True)  # fmt: skip
     return done.stdout.strip() or "unknown"
 
