@@ -202,11 +202,15 @@ def run_row(args: argparse.Namespace) -> None:
 
 
 def _commit(tree: Path) -> str:
-    """The checkout's commit, marked ``-dirty`` where tracked files differ from it."""
-    done = subprocess.run(["git", "-C", str(tree), "describe", "--always", "--dirty",
-                           "--abbrev=7", "--exclude", "*"],
-                          capture_output=True, text=True)  # fmt: skip
-    return done.stdout.strip() or "unknown"
+    """The checkout's commit, marked ``-dirty`` where tracked files other than the results
+    differ from it."""
+    git = ["git", "-C", str(tree)]
+    done = subprocess.run([*git, "rev-parse", "--short=7", "HEAD"], capture_output=True,
+                          text=True)  # fmt: skip
+    changed = subprocess.run([*git, "diff", "--quiet", "HEAD", "--", ".",
+                              ":(exclude)benchmarks/results"], capture_output=True)  # fmt: skip
+    commit = done.stdout.strip() or "unknown"
+    return commit + ("-dirty" if changed.returncode == 1 else "")
 
 
 def _number(value: Any, digits: str = ".3g") -> str:
