@@ -32,7 +32,8 @@ def N(op: str, *children: Node | Param) -> Node:
 
 EPS = N("eps")
 DEV, VOL = N("dev", EPS), N("vol", EPS)
-START_WEIGHT = Param("sigmoid", 2.0)  # 0.88: inside the plastic terms' start range (-1, 3)
+START_WEIGHT = Param("sigmoid", 2.0)  # 0.88: inside the earlier plastic terms' range (-1, 3)
+UNIT_WEIGHT = Param("unit", 1.1)  # min(raw, 1): the correction replaces F
 
 
 def radial_return(radius: Node, volumetric: Node = VOL) -> Node:
@@ -59,6 +60,15 @@ FORMS: dict[str, tuple[str, Genome, str]] = {
     # fluid as J^(1/3) R: the same stress under an isotropic elastic law
     "fluid-rotated": ("fluid", Genome("plastic", (
         Term(START_WEIGHT, N("from_strain", VOL)),)), "fluid.py"),
+    # the blocks, with a weight that reaches 1: von Mises from a radius of 0.135
+    "von-mises-block": ("plasticine", Genome("plastic", (Term(UNIT_WEIGHT, N("from_strain", N(
+        "cylinder", EPS, N("const", Param("log", -2.0))))),)), "von_mises.py"),
+    # Drucker-Prager from a slope of e^-1 = 0.37 (the truth's 0.535)
+    "drucker-prager-block": ("granular", Genome("plastic", (Term(UNIT_WEIGHT, N("from_strain", N(
+        "cone", EPS, N("const", Param("log", -1.0))))),)), "drucker_prager.py"),
+    # fluid as J^(1/3) R with its weight starting at 0.8
+    "fluid-unit": ("fluid", Genome("plastic", (
+        Term(Param("unit", 0.8), N("from_strain", VOL)),)), "fluid.py"),
     # neo-Hookean: mu (F F^T - I) + lam log J I, both moduli starting at e^10 (truth ~e^12)
     "neo-hookean": ("elastic", Genome("elastic", (
         Term(Param("log", 10.0), N("sub", N("matmul", N("F"), N("T", N("F"))), N("I"))),
