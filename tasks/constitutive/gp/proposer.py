@@ -1,20 +1,23 @@
 """The LLM-free proposer of the constitutive-law tasks: genetic programming over law code.
 
-Stateless: a parent's genome is read back from the comment its code carries, so a resumed run
-proposes exactly what the original would have. A parent without one (the task's seed law, code
+Stateless: a parent's genome is read back from the comment its code carries, and the run's
+earlier answers come with each request (``tried``), so a resumed run proposes exactly what the
+original would have. A parent without one (the task's seed law, code
 written by a model) stands in as the genome of the task's seed law (:mod:`.seeds`: the identity
 for plastic search, the linear law for elastic search), keeping its loss. Children start from
 their parents' fitted parameter values (``Parent.parameters``), not from the values the parents
-started with: the fit accumulates over generations, as in a Lamarckian (memetic) algorithm.
+started with: the fit accumulates over generations, as in a Lamarckian (memetic) algorithm;
+a plastic correction new to its parents starts from a fresh weight.
 
 Temperature sets the mix of operators: at the exploit temperature (0.5 and below) mostly small
 steps (perturbed starting values, a swapped operation, one term added or dropped) from parents
 chosen by large tournaments; at the explore temperature (1.0 and above) mostly subtree
 replacement, crossover and fresh random laws from parents chosen by pairs. In between, the
 weights are interpolated. Perturbations grow with temperature too. A child made by changing
-structure must have a form (:mod:`.canonical`) new to its parents and its batch; in plastic
-search few children only move constants (some restart a form's fit from new starting values),
-and none when exploring.
+structure must have a form (:mod:`.canonical`) new to the run (its parents, its batch and the
+earlier answers); in plastic search few children only move constants (some restart a form's
+fit from new starting values), none when exploring, and most explore children first try the
+most probable small forms not yet tried (:mod:`.enumeration`).
 """
 
 from __future__ import annotations
