@@ -219,6 +219,11 @@ def _number(value: Any, digits: str = ".3g") -> str:
     return format(float(value), digits)
 
 
+def _percent(value: Any) -> str:
+    """A fraction in percent, two significant digits (0.015 %, 18 %)."""
+    return "-" if value is None else f"{100 * float(value):.2g} %"
+
+
 def table(path: Path = RESULTS) -> str:
     """The results file as a markdown table, one line per row run."""
     lines = [
@@ -231,7 +236,7 @@ def table(path: Path = RESULTS) -> str:
         ratio = None
         if r["best"] not in (None, "inf") and r["fitted_truth"]:
             ratio = float(r["best"]) / float(r["fitted_truth"])
-        held = f"{_number(r['held_out'], '.1%')} / {_number(r['fitted_truth_held_out'], '.1%')}"
+        held = f"{_percent(r['held_out'])} / {_percent(r['fitted_truth_held_out'])}"
         lines.append(
             f"| {r['row']} | {r['seed']} | {r['label']} | {r['commit']} | {_number(r['best'])} "
             f"| {_number(r['truth'])} | {_number(r['fitted_truth'])} | {_number(ratio)} "
