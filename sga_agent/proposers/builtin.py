@@ -20,21 +20,23 @@ class BuiltinAdapter:
 
     def __init__(self, builtin: BuiltinProposer) -> None:
         self.builtin = builtin
-
-    def _reads_tried(self) -> bool:
-        """Whether the built-in proposer takes the run's earlier answers (``tried=``)."""
-        try:
-            return "tried" in inspect.signature(self.builtin.propose_from).parameters
-        except (TypeError, ValueError):
-            return False
+        self.reads_tried = _takes_tried(builtin)
 
     @property
     def name(self) -> str:
         return self.builtin.name
 
     def propose(self, request: ProposalRequest) -> list[Proposal]:
-        extra = {"tried": list(request.tried)} if self._reads_tried() else {}
+        extra = {"tried": list(request.tried)} if self.reads_tried else {}
         texts = self.builtin.propose_from(
             list(request.parents), request.temperature, request.n, request.seed, **extra
         )
         return [Proposal(text, self.name, request.temperature) for text in texts[: request.n]]
+
+
+def _takes_tried(builtin: BuiltinProposer) -> bool:
+    """Whether ``builtin.propose_from`` takes the run's earlier answers (``tried=``)."""
+    try:
+        return "tried" in inspect.signature(builtin.propose_from).parameters
+    except (TypeError, ValueError):
+        return False

@@ -42,7 +42,7 @@ class _Forward:
         self.params: list[tuple[str, Param, str]] = []  # name, leaf, meaning
         self.lines: list[str] = []
         self.needs: set[str] = set()
-        self.helpers: list[str] = []
+        self.helpers: set[str] = set()
         self.names: dict[tuple[Expr, str], str] = {}
 
     def param(self, leaf: Param, role: str = "k", meaning: str = "") -> str:
@@ -60,7 +60,7 @@ class _Forward:
             return self.names[key]
         op = grammar.OPS[value_type][expr.op]
         self.needs.update(op.needs)
-        self.helpers += [name for name in op.helpers if name not in self.helpers]
+        self.helpers.update(op.helpers)
         if op.terminal:
             return op.template
         args = [self.value(child, arg) for child, arg in zip(expr.children, op.args, strict=True)]

@@ -272,9 +272,14 @@ def random_expr(
     return Node(op.name, tuple(random_expr(rng, arg, budget - 1, kind) for arg in op.args))
 
 
+def random_coefficient(rng: random.Random, kind: str) -> Param:
+    """A term's coefficient for a ``kind`` law, drawn from its start range."""
+    raw = round(rng.uniform(*grammar.TERM_INITIAL[kind]), 4)
+    return Param(grammar.TERM_TRANSFORM[kind], raw)
+
+
 def random_term(rng: random.Random, kind: str) -> Term:
-    transform = grammar.TERM_TRANSFORM[kind]
-    coefficient = Param(transform, round(rng.uniform(*grammar.TERM_INITIAL[kind]), 4))
+    coefficient = random_coefficient(rng, kind)
     while True:
         expr = random_expr(rng, MATRIX, rng.randint(*RANDOM_DEPTH), kind, leaf=0.0)
         assert isinstance(expr, Node)

@@ -32,7 +32,7 @@ from tasks.constitutive.gp import grammar
 from tasks.constitutive.gp.canonical import Key, form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
 from tasks.constitutive.gp.enumeration import loose_form, small_forms
-from tasks.constitutive.gp.genome import Genome, Param, random_genome, to_json
+from tasks.constitutive.gp.genome import Genome, random_coefficient, random_genome, to_json
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS, restart
 
@@ -198,12 +198,10 @@ def _fresh_weights(rng: random.Random, child: Genome, parents: tuple[Genome, ...
     fitted weight belongs to its correction (a weight fitted near 0 for a poor correction
     would otherwise start, and often stay, the better one it became)."""
     known = {term.expr for parent in parents for term in parent.terms}
-    low, high = grammar.TERM_INITIAL["plastic"]
     terms = tuple(
         term
         if term.expr in known
-        else replace(term, coefficient=Param(grammar.TERM_TRANSFORM["plastic"],
-                                             round(rng.uniform(low, high), 4)))  # fmt: skip
+        else replace(term, coefficient=random_coefficient(rng, "plastic"))
         for term in child.terms
     )
     return replace(child, terms=terms)

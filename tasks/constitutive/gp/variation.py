@@ -20,6 +20,7 @@ from tasks.constitutive.gp.genome import (
     fits,
     graft_term,
     params,
+    random_coefficient,
     random_expr,
     random_genome,
     random_term,
@@ -189,11 +190,11 @@ def restart(rng: random.Random, genome: Genome, other: Genome, temperature: floa
         return None
     for index, path, param in found:
         if path is None and param.transform == grammar.TERM_TRANSFORM[genome.kind]:
-            low, high = grammar.TERM_INITIAL[genome.kind]
+            new = random_coefficient(rng, genome.kind)
         else:
-            low, high = grammar.initial(param.transform, genome.kind)
-        raw = round(rng.uniform(low, high), 4)
-        genome = with_param(genome, index, path, replace(param, raw=raw))
+            raw = round(rng.uniform(*grammar.initial(param.transform, genome.kind)), 4)
+            new = replace(param, raw=raw)
+        genome = with_param(genome, index, path, new)
     return genome
 
 
