@@ -21,10 +21,12 @@ alone would allow if everything else took no time. Usage::
 
     python benchmarks/evaluate_speed.py [--epochs 3] [--rounds 3] [--tasks elastic plasticine]
         [--original ~/SGA --original-python ~/orig-venv/bin/python] [--baseline ../before]
-        [--profile] [--busy-core]
+        [--profile] [--busy-core] [--option KEY=VALUE] [--variant LABEL:KEY=VALUE,...]
 
-``--busy-core`` runs every configuration twice per round, alone and beside another process
-spinning on one core (``python -c "while True: pass"``), and prints each one's slowdown.
+``--option`` sets a task option of our runs; ``--variant small:graph_memory_mb=100`` adds
+this checkout with other options to the rotation, with its ratio to ours. ``--busy-core``
+runs every configuration twice per round, alone and beside another process spinning on one
+core (``python -c "while True: pass"``), and prints each one's slowdown.
 """
 
 from __future__ import annotations
@@ -187,13 +189,14 @@ def _resident_mb() -> float:
 
 
 def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
-             graph_memory_mb: float | None, tree: Path = ROOT) -> dict:  # fmt: skip
-    """Our evaluation of ``task`` in a fresh process with ``threads`` threads, by the code of
-    checkout ``tree`` (this one by default)."""
+             options: dict[str, str], tree: Path = ROOT) -> dict:  # fmt: skip
+    """Our evaluation of ``task`` in a fresh process with ``threads`` threads and the task
+    options ``options`` (texts), by the code of checkout ``tree`` (this one by default)."""
     command = [sys.executable, str(tree / "benchmarks" / "evaluate_speed.py"), "--child", task,
                "--epochs", str(epochs), "--graph", str(graph)]  # fmt: skip
-    if graph_memory_mb is not None:
-        command += ["--graph-memory-mb", str(graph_memory_mb)]
+    for key, value in options.items():  # older checkouts know graph_memory_mb by its flag only
+        command += (["--graph-memory-mb", value] if key == "graph_memory_mb"
+                    else ["--option", f"{key}={value}"])  # fmt: skip
     if profile:
         command.append("--profile")
     path = os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")])
@@ -289,6 +292,11 @@ def main() -> None:
                         "cores")  # fmt: skip
     parser.add_argument("--graph-memory-mb", type=float,
                         help="our task option graph_memory_mb (default: the task's)")  # fmt: skip
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="a task option for our runs (repeatable)")
+    parser.add_argument("--variant", action="append", default=[], metavar="LABEL:KEY=VALUE,...",
+                        help="also run ours with these task options, labelled LABEL, in the same "
+                        "rotation (repeatable)")  # fmt: skip
     parser.add_argument("--busy-core", action="store_true",
                         help="run everything twice per round, alone and beside another process "
                         "spinning on one core")  # fmt: skip
@@ -296,19 +304,22 @@ def main() -> None:
     parser.add_argument("--graph", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        raw = {} if args.graph_memory_mb is None else {"graph_memory_mb": str(args.graph_memory_mb)}
+        raw = our_options(args)
         print(json.dumps(run_one(args.child, args.epochs, args.profile, args.graph, raw)))
         return
     if args.original:
         if set(args.tasks) - set(ORIGINAL_TASKS):
             parser.error(f"--original covers only {', '.join(ORIGINAL_TASKS)}")
         prepare_original(args)
-    trees = {"ours": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
+    ours = our_options(args)
+    trees = {"ours": (ROOT, ours)} | variants(args.variant, ours)
+    if args.baseline:
+        trees["baseline"] = (args.baseline.resolve(), ours)
     folder = Path(tempfile.mkdtemp(prefix="evaluate-speed-"))
     graphs = {task: capture(task, folder) for task in args.tasks}
     for task in args.tasks:  # fills Taichi's kernel cache and the ground truth: no round compiles
-        for tree in trees.values():
-            run_ours(task, 1, False, args.threads, graphs[task], args.graph_memory_mb, tree)
+        for tree, options in trees.values():
+            run_ours(task, 1, False, args.threads, graphs[task], options, tree)
     conditions = ("alone", "busy") if args.busy_core else ("alone",)
     load_before = os.getloadavg()
     started = time.perf_counter()
@@ -316,10 +327,10 @@ def main() -> None:
     for round_index in range(args.rounds):
         for task in args.tasks:
             for condition in conditions:
-                for impl, tree in trees.items():
+                for impl, (tree, options) in trees.items():
                     with BusyCore(condition == "busy"):
                         run = run_ours(task, args.epochs, args.profile, args.threads,
-                                       graphs[task], args.graph_memory_mb, tree)  # fmt: skip
+                                       graphs[task], options, tree)  # fmt: skip
                     runs.setdefault((impl, task, condition), []).append(run)
                 if args.original:
                     with BusyCore(condition == "busy"):
@@ -337,28 +348,58 @@ def main() -> None:
     )
     print(f"{'task':<11} {'impl':<9} {'load':<6} {'s/epoch min / median / max':>27} "
           f"{'peak MB':>8} {'ours faster (medians)':>22}")  # fmt: skip
+    impls = ("original", "baseline", *[name for name in trees if name not in ("ours", "baseline")],
+             "ours")  # fmt: skip
+    for name in impls[2:-1]:
+        print(f"{name}: {trees[name][1]}")
     for task in args.tasks:
         medians = {}
         for condition in conditions:
-            for impl in ("original", "baseline", "ours"):
+            for impl in impls:
                 if (impl, task, condition) not in runs:
                     continue
                 epochs = [s for run in runs[impl, task, condition] for s in run["epoch_s"]]
                 peak = max(run["peak_mb"] for run in runs[impl, task, condition])
                 medians[impl, condition] = statistics.median(epochs)
                 print(f"{task:<11} {impl:<9} {condition:<6} {spread(epochs):>27} {peak:8.0f}")
-            for impl in ("original", "baseline"):
+            for impl in impls[:-1]:
                 if (impl, condition) in medians:
                     ratio = medians[impl, condition] / medians["ours", condition]
                     print(f"{task:<11} {'':<9} {condition:<6} {'':>27} {'':>8} "
                           f"{ratio:>10.2f}x vs {impl}")  # fmt: skip
         if args.busy_core:
-            for impl in ("original", "baseline", "ours"):
+            for impl in impls:
                 if (impl, "busy") in medians:
                     slowdown = medians[impl, "busy"] / medians[impl, "alone"]
                     print(f"{task:<11} {impl:<9} busy / alone: {slowdown:.2f}x")
         print(where_an_epoch_goes(task, runs["ours", task, "alone"],
                                   medians.get(("original", "alone"))))  # fmt: skip
+
+
+def our_options(args: argparse.Namespace) -> dict[str, str]:
+    """Our task options from ``--option`` and ``--graph-memory-mb`` (texts)."""
+    options = dict(_key_value(text) for text in args.option)
+    if args.graph_memory_mb is not None:
+        options["graph_memory_mb"] = str(args.graph_memory_mb)
+    return options
+
+
+def variants(texts: list[str], ours: dict[str, str]) -> dict[str, tuple[Path, dict[str, str]]]:
+    """``--variant LABEL:KEY=VALUE,...``: this checkout with these options on top of ours."""
+    runs = {}
+    for text in texts:
+        label, _, pairs = text.partition(":")
+        if not label or label in ("ours", "baseline", "original"):
+            sys.exit(f"--variant {text!r}: label it, e.g. small:graph_memory_mb=100")
+        runs[label] = (ROOT, ours | dict(_key_value(pair) for pair in pairs.split(",") if pair))
+    return runs
+
+
+def _key_value(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        sys.exit(f"expected KEY=VALUE, got {text!r}")
+    return key.strip(), value.strip()
 
 
 def where_an_epoch_goes(task: str, runs: list[dict], original: float | None) -> str:

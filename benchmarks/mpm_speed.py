@@ -6,6 +6,7 @@ own. Run from the repository root::
     python benchmarks/mpm_speed.py            # paper scene + 100k-particle scene
     python benchmarks/mpm_speed.py --quick    # paper scene only
     python benchmarks/mpm_speed.py --profile  # where the paper scene's time goes
+    python benchmarks/mpm_speed.py --arch cuda --compare-arch cpu   # on a GPU, and agreement
 
 Prints particle-steps per second, the wall time of the paper scene's 1000-step
 forward+backward, peak memory, and the cold (empty offline cache) and warm start-up.
@@ -20,6 +21,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 import taichi_mpm as tm
 
@@ -57,9 +60,11 @@ for _ in range(config["repeats"]):
     t = time.perf_counter()
     positions = sim.forward(frames)
     timings["forward"].append(time.perf_counter() - t)
-    sim.backward(np.ones_like(positions))
+    gradients = sim.backward(np.ones_like(positions))
     timings["forward_backward"].append(time.perf_counter() - t)
 print(json.dumps({
+    "final_positions": positions[-1].tolist(),
+    "material_grads": gradients.material,
     "particles": scene.num_particles, "steps": scene.steps, "segment": sim.segment,
     "startup_s": startup,
     "forward_s": min(timings["forward"]),
@@ -103,12 +108,35 @@ def run(config: dict) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def print_agreement(paper: list, other_arch: str, repeats: int) -> None:
+    """Run the paper scene on ``other_arch`` and print how far its results are from ours."""
+    with tempfile.TemporaryDirectory() as cache:
+        for _, material, _, warm in paper:
+            config = {"scene": "paper", "steps": 1000, "material": material, "arch": other_arch,
+                      "cache": cache, "repeats": repeats}
+            other = run(config)
+            here = np.asarray(warm["final_positions"])
+            there = np.asarray(other["final_positions"])
+            body = float(np.ptp(here, axis=0).max())
+            grads = ", ".join(
+                f"d/d{name} {value:.4g} vs {other['material_grads'][name]:.4g}"
+                for name, value in warm["material_grads"].items()
+            )
+            print(
+                f"paper scene, {material}, against {other_arch}: final positions differ by at most "
+                f"{np.abs(here - there).max() / body:.2e} body sizes; {grads}; "
+                f"fwd+bwd {other['forward_backward_s']:.2f} s there"
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="paper scene only")
     parser.add_argument("--arch", default="cpu", help="cpu, cuda, vulkan or gpu")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--profile", action="store_true", help="kernel profile of the paper scene")
+    parser.add_argument("--compare-arch", metavar="ARCH",
+                        help="also run the paper scene on ARCH and print how far the two agree")
     args = parser.parse_args()
     if args.profile:
         subprocess.run([sys.executable, "-c", PROFILE, args.arch], check=True, cwd=REPOSITORY)
@@ -147,6 +175,8 @@ def main() -> None:
             f"{cold['startup_s']:>8.1f}{warm['startup_s']:>8.1f}"
         )
     paper = [r for r in rows if r[0] == "paper"]
+    if args.compare_arch:
+        print_agreement(paper, args.compare_arch, args.repeats)
     for _, material, _, warm in paper:
         print(
             f"paper scene, {material}: 1000-step forward+backward "

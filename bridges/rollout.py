@@ -215,7 +215,7 @@ def trajectory_loss(
     scale = 1.0 / (float(weights[1:].sum()) * 3)
     first = _start_state(rollout, resets, 0)
     rollout.check_laws(first)
-    positions = np.empty(tuple(observed.shape))
+    positions = np.empty(tuple(observed.shape), dtype=observed.numpy().dtype)  # as simulated
     positions[0] = first.x.numpy()
     if resets is None and backward:
         return _checkpointed(rollout, observed, weights, starts, segment, scale, positions)
@@ -245,10 +245,13 @@ def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_byte
     Measured, not guessed: a step is run with gradients from the end of another one and what
     its graph keeps is counted (the tensors it saves, the laws' intermediates and the packed
     input among them, and the storage of its input state); a segment holds ``segment`` such
-    steps per copy. At least 1.
+    steps per copy. The step's input requires a gradient, as inside a segment: otherwise
+    autograd would keep nothing for the laws' operations before their first parameter (an
+    SVD of the input, say), and the count would fall short. At least 1.
     """
     with torch.no_grad():
         previous = rollout.step(state.detached())  # its outputs are views of one packed tensor
+    previous = State(*(tensor.requires_grad_() for tensor in previous.tensors()))
     storage = previous.F.untyped_storage()
     kept: dict[int, int] = {storage.data_ptr(): storage.nbytes()}
 
@@ -264,9 +267,12 @@ def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_byte
 
 
 def _groups(starts: list[int], steps: int, segment: int, batch: int) -> list[list[int]]:
-    """Segment indices in runs of at most ``batch`` full segments; a short last one alone."""
+    """Segment indices in as few runs of at most ``batch`` full segments as there can be, the
+    runs as even as they can be (10 segments at 6 a batch: 5 and 5, so the graph held at once is
+    5 segments', at the speed of 2 runs); a short last segment alone."""
     full = [index for index, start in enumerate(starts) if start + segment <= steps]
-    groups = [full[i : i + batch] for i in range(0, len(full), batch)]
+    size = -(-len(full) // -(-len(full) // batch)) if full else 1  # ceil(n / ceil(n / batch))
+    groups = [full[i : i + size] for i in range(0, len(full), size)]
     return groups + [[index] for index in range(len(full), len(starts))]
 
 

@@ -43,7 +43,14 @@ from typing import IO, Any
 from sga_agent import registry
 from sga_agent.helper_protocol import answer, describe, start_helper
 from sga_agent.options import options_from_data
-from sga_agent.task import Evaluation, EvaluationSettings, Task, TaskBase, is_out_of_memory
+from sga_agent.task import (
+    Evaluation,
+    EvaluationSettings,
+    Task,
+    TaskBase,
+    is_out_of_memory,
+    release_freed_memory,
+)
 
 TRACEBACK_TAIL_CHARS = 4000
 
@@ -73,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
             answer(answers, {"warm": True})
             continue
         evaluation = failure or score(task, request["data"], request["settings"], options)
+        release_freed_memory()  # a warm worker rests at its imports' size, not at the last peak
         answer(answers, evaluation.to_dict())
         if evaluation.status == "out_of_memory":
             return 0

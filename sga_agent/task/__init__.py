@@ -29,6 +29,7 @@ packages can import it cheaply.
 from __future__ import annotations
 
 from sga_agent.task.code import CodeRejected, Problem
+from sga_agent.task.memory import release_freed_memory
 from sga_agent.task.protocol import (
     BuiltinProposer,
     Task,
@@ -68,5 +69,5 @@ __all__ = [
     "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "Image", "InvalidSolution",
     "NoOptions", "Parent", "Problem", "PromptParts", "ReportView", "Section", "Table", "Task",
     "TaskBase", "TaskKind", "Text", "as_task", "configured", "is_out_of_memory",
-    "options_type", "solution_with_parameters",
+    "options_type", "release_freed_memory", "solution_with_parameters",
 ]  # fmt: skip

@@ -26,6 +26,7 @@ from bridges.rollout import (
     segments_per_batch,
     trajectory_loss,
 )
+from sga_agent.task import release_freed_memory
 from tasks.constitutive.adam import Adam
 from tasks.constitutive.ground_truth import Trajectory
 
@@ -176,6 +177,7 @@ class _Fit:
         ``failure``, when the simulation or the gradient is not finite."""
         started = time.perf_counter()
         epoch = self.epochs_done
+        release_freed_memory()  # the last epoch's graph: so this one reuses, not adds, memory
         try:
             observed = self.observed
             if observed.states is None:  # no teacher forcing: checkpointed segments

@@ -85,6 +85,9 @@ def test_segments_are_grouped_by_length_and_batch():
     assert _groups(starts, 70, 20, 2) == [[0, 1], [2], [3]]
     assert _groups(list(range(0, 80, 20)), 80, 20, 10) == [[0, 1, 2, 3]]
     assert _groups(starts, 70, 20, 1) == [[0], [1], [2], [3]]
+    # as few runs as the batch allows, as even as they can be
+    assert _groups(list(range(0, 100, 10)), 100, 10, 6) == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9]]
+    assert _groups(list(range(0, 100, 10)), 100, 10, 4) == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9]]
 
 
 class _MeanOverParticles(torch.nn.Module):
@@ -119,3 +122,27 @@ def test_the_batch_size_follows_the_measured_graph_memory():
     # half a segment of slack: a second measurement may differ slightly from the first
     assert segments_per_batch(rollout, start, SEGMENT, int(3.5 * per_segment)) == 3
     assert segments_per_batch(rollout, start, SEGMENT, 0) == 1
+
+
+@pytest.mark.parametrize("name", ["von_mises", "neo_hookean"])
+def test_the_measured_segment_memory_is_what_a_segment_keeps(name):
+    """The budget's measurement counts what autograd keeps for a real segment: a step measured
+    from an input without a gradient would miss the laws' operations before their first
+    parameter (the SVD of F_trial) and let batches outgrow the budget."""
+    material = MATERIALS[name]
+    scene, observed, resets = _observation(material)
+    plastic, elastic = from_material(material, dtype=torch.float64)
+    rollout = Rollout(scene, plastic, elastic)
+    start = State.from_arrays(resets, 0, torch.float64)
+    measured = 2**40 / segments_per_batch(rollout, start, SEGMENT, 2**40)
+
+    kept: dict[int, int] = {}
+
+    def count(tensor: torch.Tensor) -> torch.Tensor:
+        storage = tensor.untyped_storage()
+        kept[storage.data_ptr()] = storage.nbytes()
+        return tensor
+
+    with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor):
+        trajectory_loss(rollout, observed[: SEGMENT + 1], resets, segment=SEGMENT, backward=True)
+    assert 0.9 * sum(kept.values()) <= measured <= 1.15 * sum(kept.values())
