@@ -6,7 +6,9 @@ configuration runs in a fresh process (Taichi's thread count is fixed when it st
 stresses, 20 timed steps after one untimed step, the mean wall time of a step's
 ``mpm_step`` + ``backward`` and, with ``--profile``, Taichi's kernel profile. Usage::
 
-    python benchmarks/bridge_step.py [--copies 10 100] [--threads 1 2] [--profile]
+    python benchmarks/bridge_step.py [--copies 10 100] [--threads 1 2] [--profile] [--arch cuda]
+
+With ``--arch cuda`` the tensors live on the GPU and Taichi runs there (its loops parallel).
 
 To compare with an earlier commit, run the same command from a worktree of it.
 """
@@ -27,7 +29,8 @@ import taichi as ti
 import taichi_mpm as tm
 config = json.loads(sys.argv[1])
 torch.set_num_threads(config["threads"])
-tm.init(arch="cpu", precision="float32", kernel_profiler=config["profile"])
+tm.init(arch=config["arch"], precision="float32", kernel_profiler=config["profile"])
+device = "cuda" if config["arch"] == "cuda" else "cpu"
 from bridges.step import Transfer, mpm_step
 scene = tm.paper_scene(steps=100)
 B, N = config["copies"], config["copies"] * scene.num_particles
@@ -41,18 +44,25 @@ inputs = [
     torch.eye(3).expand(N, 3, 3).contiguous(),
     1e3 * torch.randn(N, 3, 3, generator=generator),
 ]
-leaves = [t.clone().requires_grad_() for t in inputs]
+leaves = [t.to(device).requires_grad_() for t in inputs]
+
+def synchronize():
+    ti.sync()
+    if device == "cuda":
+        torch.cuda.synchronize()
 
 def step():
     outputs = mpm_step(*leaves, transfer)
     sum((o * o).sum() for o in outputs).backward()
 
 step()
+synchronize()
 if config["profile"]:
     ti.profiler.clear_kernel_profiler_info()
 started = time.perf_counter()
 for _ in range(20):
     step()
+synchronize()
 print(json.dumps({"ms": (time.perf_counter() - started) / 20 * 1e3, "particles": N}))
 if config["profile"]:
     ti.profiler.print_kernel_profiler_info()
@@ -80,13 +90,14 @@ def main() -> None:
                         choices=["auto", "serial", "parallel"],
                         help="Taichi loops: the bridge's own choice, or forced")  # fmt: skip
     parser.add_argument("--profile", action="store_true", help="Taichi's kernel profile")
+    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda"])
     args = parser.parse_args()
     print(f"{'copies':>6} {'particles':>9} {'threads':>7} {'loops':>8} {'ms per step':>11}")
     for copies in args.copies:
         for threads in args.threads:
             for loops in args.loops:
                 config = {"copies": copies, "threads": threads, "loops": loops,
-                          "profile": args.profile}  # fmt: skip
+                          "profile": args.profile, "arch": args.arch}  # fmt: skip
                 row = run(config)
                 print(f"{copies:>6} {row['particles']:>9} {threads:>7} {loops:>8} "
                       f"{row['ms']:>11.1f}")  # fmt: skip
