@@ -348,9 +348,9 @@ def main() -> None:
     )
     print(f"{'task':<11} {'impl':<9} {'load':<6} {'s/epoch min / median / max':>27} "
           f"{'peak MB':>8} {'ours faster (medians)':>22}")  # fmt: skip
-    impls = ("original", "baseline", *[name for name in trees if name not in ("ours", "baseline")],
-             "ours")  # fmt: skip
-    for name in impls[2:-1]:
+    labels = [name for name in trees if name not in ("ours", "baseline")]  # the --variant runs
+    impls = ("original", "baseline", *labels, "ours")
+    for name in labels:
         print(f"{name}: {trees[name][1]}")
     for task in args.tasks:
         medians = {}

@@ -27,6 +27,7 @@ import numpy as np
 import taichi_mpm as tm
 
 REPOSITORY = Path(__file__).resolve().parents[1]  # children import benchmarks.mpm_speed
+PAPER_SCENE = {"scene": "paper", "steps": 1000}
 
 MATERIALS = {
     "elastic": tm.Material(tm.NeoHookean(E=1e5, nu=0.3)),
@@ -112,8 +113,8 @@ def print_agreement(paper: list, other_arch: str, repeats: int) -> None:
     """Run the paper scene on ``other_arch`` and print how far its results are from ours."""
     with tempfile.TemporaryDirectory() as cache:
         for _, material, _, warm in paper:
-            config = {"scene": "paper", "steps": 1000, "material": material, "arch": other_arch,
-                      "cache": cache, "repeats": repeats}
+            config = {**PAPER_SCENE, "material": material, "arch": other_arch, "cache": cache,
+                      "repeats": repeats}  # fmt: skip
             other = run(config)
             here = np.asarray(warm["final_positions"])
             there = np.asarray(other["final_positions"])
@@ -142,7 +143,7 @@ def main() -> None:
         subprocess.run([sys.executable, "-c", PROFILE, args.arch], check=True, cwd=REPOSITORY)
         return
 
-    scenes = [{"scene": "paper", "steps": 1000}]
+    scenes = [PAPER_SCENE]
     if not args.quick:
         scenes.append({"scene": "large", "side": 46, "grid": 64, "steps": 50})
     with tempfile.TemporaryDirectory() as cache:

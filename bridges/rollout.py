@@ -18,6 +18,7 @@ gradients that stay finite for repeated singular values.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,7 +272,8 @@ def _groups(starts: list[int], steps: int, segment: int, batch: int) -> list[lis
     runs as even as they can be (10 segments at 6 a batch: 5 and 5, so the graph held at once is
     5 segments', at the speed of 2 runs); a short last segment alone."""
     full = [index for index, start in enumerate(starts) if start + segment <= steps]
-    size = -(-len(full) // -(-len(full) // batch)) if full else 1  # ceil(n / ceil(n / batch))
+    runs = math.ceil(len(full) / batch)
+    size = math.ceil(len(full) / runs) if runs else 1
     groups = [full[i : i + size] for i in range(0, len(full), size)]
     return groups + [[index] for index in range(len(full), len(starts))]
 
