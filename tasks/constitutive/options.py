@@ -14,8 +14,9 @@ class ConstitutiveOptions:
     it must match a Taichi already running in the process.
     ``graph_memory_mb``: autograd graph the inner fit may hold at once (default 250 MB): the
     teacher-forced segments of an epoch run in batches as large as fit in it (faster, more
-    memory; 1000 particles take about 19 MiB per 100-step segment with the elastic task's laws,
-    46 MiB with the plastic ones in torch), in as few batches as fit and as even as they can be.
+    memory; ``bridges.rollout.segments_per_batch`` measures about 19 MiB per 100-step segment of
+    1000 particles for the elastic task's true law, 46 MiB for plasticine's in torch), in as few
+    batches as fit and as even as they can be.
     ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
     and one in reverse a step, where the translation covers their operations and agrees with
     torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD;
