@@ -1,4 +1,7 @@
-"""Small laws in order of prior probability: what a plastic search tries before random ones.
+"""Small laws in order of prior probability: what a search tries before random ones.
+
+Plastic search tries one-term forms (:func:`small_forms`), elastic search pairs of admissible
+one-term forms (:func:`elastic_pairs`).
 
 Every one-term expression of at most :data:`MAX_SIZE` nodes is listed with its probability under
 random generation's operation weights (:data:`grammar.OP_WEIGHTS`, each choice normalised among
@@ -18,7 +21,8 @@ from collections.abc import Iterator
 
 from tasks.constitutive.gp import grammar
 from tasks.constitutive.gp.canonical import Key, form
-from tasks.constitutive.gp.genome import Expr, Genome, Node, Param, Term, size, trivial
+from tasks.constitutive.gp.elastic_forms import FORMS
+from tasks.constitutive.gp.genome import Expr, Genome, Node, Param, Term, from_json, size, trivial
 from tasks.constitutive.gp.grammar import MATRIX, PARAM_TYPES, WEIGHT
 
 MAX_SIZE = 5  # nodes of an enumerated term, its parameter leaves included
@@ -37,7 +41,7 @@ def _compositions(total: int, parts: int) -> Iterator[tuple[int, ...]]:
 
 
 @functools.cache
-def _expressions(kind: str, value_type: str, nodes: int) -> tuple[tuple[Expr, float], ...]:
+def expressions(kind: str, value_type: str, nodes: int) -> tuple[tuple[Expr, float], ...]:
     """Every expression of ``value_type`` with exactly ``nodes`` nodes, with its probability."""
     if value_type in PARAM_TYPES:
         if nodes != 1:
@@ -56,7 +60,7 @@ def _expressions(kind: str, value_type: str, nodes: int) -> tuple[tuple[Expr, fl
                 found.append((Node(op.name), chance))
             continue
         for sizes in _compositions(nodes - 1, len(op.args)):
-            children = [_expressions(kind, arg, n) for arg, n in zip(op.args, sizes, strict=True)]
+            children = [expressions(kind, arg, n) for arg, n in zip(op.args, sizes, strict=True)]
             for combination in itertools.product(*children):
                 probability = chance
                 for _, p in combination:
@@ -65,11 +69,11 @@ def _expressions(kind: str, value_type: str, nodes: int) -> tuple[tuple[Expr, fl
     return tuple(found)
 
 
-def _loose(key: Key) -> Key:
+def loose(key: Key) -> Key:
     """A canonical key with parameters' transforms dropped."""
     if key[:1] == ("#",):
         return ("#",)
-    return tuple(_loose(part) if isinstance(part, tuple) else part for part in key)
+    return tuple(loose(part) if isinstance(part, tuple) else part for part in key)
 
 
 @functools.cache
@@ -79,11 +83,11 @@ def small_forms(kind: str) -> tuple[Genome, ...]:
     chances: dict[Key, float] = {}
     likeliest: dict[Key, tuple[float, Genome]] = {}  # the form's shortest, likeliest writing
     for nodes in range(1, MAX_SIZE + 1):
-        for expr, probability in _expressions(kind, MATRIX, nodes):
+        for expr, probability in expressions(kind, MATRIX, nodes):
             if not isinstance(expr, Node) or trivial(expr, kind):
                 continue
             genome = Genome(kind, (Term(Param(grammar.TERM_TRANSFORM[kind], 1.0), expr),))
-            key = _loose(form(genome))
+            key = loose(form(genome))
             chances[key] = chances.get(key, 0.0) + probability
             if key not in likeliest or (
                 nodes == _size(likeliest[key][1]) and probability > likeliest[key][0]
@@ -99,4 +103,21 @@ def _size(genome: Genome) -> int:
 
 def loose_form(genome: Genome) -> Key:
     """The key :func:`small_forms` tells forms apart by (transforms ignored)."""
-    return _loose(form(genome))
+    return loose(form(genome))
+
+
+@functools.cache
+def elastic_pairs() -> tuple[Genome, ...]:
+    """Two-term elastic laws from the listed admissible forms (:mod:`.elastic_forms`): first each
+    form beside a pressure form (the split of every textbook hyperelastic law into a term that
+    shears and one of the volume alone, as mu (b - I) + lam log(J) I), in the order of the
+    forms' probability; then the other pairs, most probable first. Coefficients at 0: callers
+    draw starting values."""
+    forms = [(from_json(text).terms[0], chance, pressure) for text, chance, pressure in FORMS]
+    split, other = [], []
+    for (a, p, a_pressure), (b, q, b_pressure) in itertools.combinations(forms, 2):
+        if a_pressure and b_pressure:
+            continue  # no shear stiffness
+        pair = Genome("elastic", (a, b))
+        (split if a_pressure or b_pressure else other).append((-(p * q), repr(form(pair)), pair))
+    return tuple(pair for _, _, pair in sorted(split) + sorted(other))

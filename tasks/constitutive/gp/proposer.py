@@ -18,6 +18,13 @@ structure must have a form (:mod:`.canonical`) new to the run (its parents, its 
 earlier answers); in plastic search few children only move constants (some restart a form's
 fit from new starting values), none when exploring, and most explore children first try the
 most probable small forms not yet tried (:mod:`.enumeration`).
+
+In elastic search, new structure must be physically admissible (:mod:`.admissible`: frame
+indifferent, no stress at rest), and most explore children first try the next untried pair of
+admissible forms (:func:`.enumeration.elastic_pairs`). A pair's moduli start where the best
+parent's fit was heading: its stiffest fitted modulus moved on by as much as its fit moved it
+(a fit of 30 Adam steps moves a log-modulus by about 1 at most, so a law started at the seed's
+stiffness would need several generations to reach the body's).
 """
 
 from __future__ import annotations
@@ -29,10 +36,17 @@ from dataclasses import dataclass, replace
 
 from sga_agent.task import Parent
 from tasks.constitutive.gp import grammar
+from tasks.constitutive.gp.admissible import admissible
 from tasks.constitutive.gp.canonical import Key, form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
-from tasks.constitutive.gp.enumeration import loose_form, small_forms
-from tasks.constitutive.gp.genome import Genome, random_coefficient, random_genome, to_json
+from tasks.constitutive.gp.enumeration import elastic_pairs, loose_form, small_forms
+from tasks.constitutive.gp.genome import (
+    Genome,
+    Param,
+    random_coefficient,
+    random_genome,
+    to_json,
+)
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS, restart
 
@@ -49,9 +63,13 @@ EXPLORE = {"perturb": 1.0, "rescale": 1.0, "restart": 0.0, "swap_op": 1.0, "resh
 #: fit from new starting values (``benchmarks/gp_search.py``).
 PLASTIC_CONSTANT_MOVES = {LOW: {"perturb": 1.0, "rescale": 0.5, "restart": 1.0},
                           HIGH: {"perturb": 0.0, "rescale": 0.0}}  # fmt: skip
-#: Share of explore children that try the next untried small form (:mod:`.enumeration`)
-#: while there is one; none in elastic search, whose laws need two terms.
-ENUMERATION_SHARE = {"plastic": 0.75, "elastic": 0.0}
+#: Share of explore children that try the next untried small form (plastic search) or pair of
+#: forms (elastic search) while there is one (:mod:`.enumeration`).
+ENUMERATION_SHARE = {"plastic": 0.75, "elastic": 0.75}
+#: Forms of at most this many terms count as enumerated when tried: one-term plastic forms,
+#: the pairs of elastic search.
+ENUMERATED_TERMS = {"plastic": 1, "elastic": 2}
+PAIR_SPREAD = 0.25  # standard deviation of a pair's log-moduli around the extrapolated stiffness
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
@@ -129,32 +147,41 @@ class GeneticProgrammingProposer:
         known = [member.genome for member in pool] + earlier
         seen = {to_json(genome) for genome in known}
         forms = {form(genome) for genome in known}
-        listed = {loose_form(genome) for genome in known if len(genome.terms) == 1}
+        enumerated = ENUMERATED_TERMS[self.searched]
+        listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
+        stiffness = _heading_stiffness(parents) if self.searched == "elastic" else math.nan
         answers = []
         for _ in range(n):
-            child, note = self._next_small_form(rng, temperature, listed) or self._child(
+            child, note = self._next_small_form(rng, temperature, listed, stiffness) or self._child(
                 rng, pool, temperature, seen, forms
             )
             seen.add(to_json(child))
             forms.add(form(child))
-            if len(child.terms) == 1:
+            if len(child.terms) <= enumerated:
                 listed.add(loose_form(child))
             answers.append(_answer(law_code(child), note))
         return answers
 
     def _next_small_form(
-        self, rng: random.Random, temperature: float, listed: set[Key]
+        self, rng: random.Random, temperature: float, listed: set[Key], stiffness: float
     ) -> tuple[Genome, str] | None:
-        """With a chance that grows with temperature (plastic search only), the most probable
-        small form not yet tried, from new starting values; None otherwise or when all are."""
+        """With a chance that grows with temperature, the most probable small form (plastic) or
+        pair of forms (elastic) not yet tried, from new starting values (an elastic pair's
+        log-moduli near ``stiffness``); None otherwise or when all are tried."""
         share = exploration(temperature) * ENUMERATION_SHARE[self.searched]
         if share <= 0 or rng.random() >= share:
             return None
-        for rank, genome in enumerate(small_forms(self.searched), start=1):
-            if loose_form(genome) not in listed:
-                child = restart(rng, genome, genome, temperature)
-                assert child is not None
-                return child, f"tried small form {rank} in order of prior probability, untried"
+        elastic = self.searched == "elastic"
+        listing = elastic_pairs() if elastic else small_forms(self.searched)
+        for rank, genome in enumerate(listing, start=1):
+            if loose_form(genome) in listed:
+                continue
+            if elastic:
+                child = _with_moduli(rng, genome, stiffness)
+                return child, f"tried pair of forms {rank} in order of prior probability, untried"
+            child = restart(rng, genome, genome, temperature)
+            assert child is not None
+            return child, f"tried small form {rank} in order of prior probability, untried"
         return None
 
     def _genome(self, parent: Parent) -> Genome:
@@ -185,12 +212,45 @@ class GeneticProgrammingProposer:
                 child = _fresh_weights(rng, child, (first.genome, second.genome))
             if child is None or to_json(child) in seen:
                 continue
+            if self.searched == "elastic" and name not in CONSTANT_MOVES and not admissible(child):
+                continue
             if name in CONSTANT_MOVES or form(child) not in forms:
                 losses = [first] if name != "crossover" else [first, second]
                 note = f"{DESCRIPTIONS[name]} the parent{'s' if len(losses) > 1 else ''} "
                 note += " and ".join(f"of loss {m.loss:.4g}" for m in losses)
                 return child, note
-        return random_genome(rng, self.searched), "drew a new random law"
+        return self._random_law(rng), "drew a new random law"
+
+    def _random_law(self, rng: random.Random) -> Genome:
+        """A random law; in elastic search an admissible one."""
+        while True:
+            genome = random_genome(rng, self.searched)
+            if self.searched != "elastic" or admissible(genome):
+                return genome
+
+
+def _heading_stiffness(parents: Sequence[Parent]) -> float:
+    """Where the best parent's fit was taking an elastic law's stiffness: its largest fitted
+    log-modulus moved on by as much as its fit moved it (the seed's without parents)."""
+    if not parents:
+        return max(term.coefficient.raw for term in seed_genome("elastic").terms)
+    best = min(parents, key=lambda parent: _loss(parent.loss))
+    genome = genome_from_code(best.code, "elastic")
+    if genome is None:  # the seed, or a model's law, stands in as the seed's genome
+        started, fitted = seed_genome("elastic"), seed_genome("elastic", best.parameters)
+    else:
+        started, fitted = genome, with_values(genome, best.parameters)
+    start, reached = (max(term.coefficient.raw for term in g.terms) for g in (started, fitted))
+    return reached + (reached - start)
+
+
+def _with_moduli(rng: random.Random, genome: Genome, stiffness: float) -> Genome:
+    """``genome`` with each term's log-modulus drawn around ``stiffness``."""
+    terms = tuple(
+        replace(term, coefficient=Param("log", round(rng.gauss(stiffness, PAIR_SPREAD), 4)))
+        for term in genome.terms
+    )
+    return replace(genome, terms=terms)
 
 
 def _fresh_weights(rng: random.Random, child: Genome, parents: tuple[Genome, ...]) -> Genome:
