@@ -21,10 +21,9 @@ most probable small forms not yet tried (:mod:`.enumeration`).
 
 In elastic search, new structure must be physically admissible (:mod:`.admissible`: frame
 indifferent, no stress at rest), and most explore children first try the next untried pair of
-admissible forms (:func:`.enumeration.elastic_pairs`). A pair's moduli start where the best
-parent's fit was heading: its stiffest fitted modulus moved on by as much as its fit moved it
-(a fit of 30 Adam steps moves a log-modulus by about 1 at most, so a law started at the seed's
-stiffness would need several generations to reach the body's).
+admissible forms (:func:`.enumeration.elastic_pairs`). A pair's moduli start near the best
+parent's largest fitted modulus: the stiffness of the body as far as the search knows it (a law
+started far from it may not reach it in one fit, or may blow up the simulation when too stiff).
 """
 
 from __future__ import annotations
@@ -69,7 +68,7 @@ ENUMERATION_SHARE = {"plastic": 0.75, "elastic": 0.75}
 #: Forms of at most this many terms count as enumerated when tried: one-term plastic forms,
 #: the pairs of elastic search.
 ENUMERATED_TERMS = {"plastic": 1, "elastic": 2}
-PAIR_SPREAD = 0.25  # standard deviation of a pair's log-moduli around the extrapolated stiffness
+PAIR_SPREAD = 0.25  # standard deviation of a pair's log-moduli around the fitted stiffness
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
@@ -149,7 +148,7 @@ class GeneticProgrammingProposer:
         forms = {form(genome) for genome in known}
         enumerated = ENUMERATED_TERMS[self.searched]
         listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
-        stiffness = _heading_stiffness(parents) if self.searched == "elastic" else math.nan
+        stiffness = _fitted_stiffness(parents) if self.searched == "elastic" else math.nan
         answers = []
         for _ in range(n):
             child, note = self._next_small_form(rng, temperature, listed, stiffness) or self._child(
@@ -229,19 +228,18 @@ class GeneticProgrammingProposer:
                 return genome
 
 
-def _heading_stiffness(parents: Sequence[Parent]) -> float:
-    """Where the best parent's fit was taking an elastic law's stiffness: its largest fitted
-    log-modulus moved on by as much as its fit moved it (the seed's without parents)."""
+def _fitted_stiffness(parents: Sequence[Parent]) -> float:
+    """The best parent's largest fitted log-modulus (the seed's default without parents): the
+    body's stiffness as far as the search knows it."""
     if not parents:
         return max(term.coefficient.raw for term in seed_genome("elastic").terms)
     best = min(parents, key=lambda parent: _loss(parent.loss))
     genome = genome_from_code(best.code, "elastic")
     if genome is None:  # the seed, or a model's law, stands in as the seed's genome
-        started, fitted = seed_genome("elastic"), seed_genome("elastic", best.parameters)
+        fitted = seed_genome("elastic", best.parameters)
     else:
-        started, fitted = genome, with_values(genome, best.parameters)
-    start, reached = (max(term.coefficient.raw for term in g.terms) for g in (started, fitted))
-    return reached + (reached - start)
+        fitted = with_values(genome, best.parameters)
+    return max(term.coefficient.raw for term in fitted.terms)
 
 
 def _with_moduli(rng: random.Random, genome: Genome, stiffness: float) -> Genome:
