@@ -98,7 +98,8 @@ def from_preset(name: str) -> str:
               show_default=str(default("exploit_temperature")), help="Exploit temperature T_l.")
 @click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
               show_default=str(default("explore_temperature")), help="Explore temperature T_h.")
-@click.option("--fidelity", type=click.Choice(FIDELITIES), show_default=str(default("fidelity")),
+@click.option("--fidelity", type=click.Choice(FIDELITIES),
+              show_default="multi in quick, full in the other presets and with --time-budget",
               help="full: every candidate gets the full fit; multi: each is screened by a "
               "cheaper fit and the best --promote share of each iteration's screens gets the "
               "full fit (only full fits are ranked and shown).")

@@ -68,16 +68,17 @@ def test_presets_give_their_values_and_settings_that_are_not_none_win():
     config = SearchConfig.from_preset("quick", task="t", proposer="builtin", iterations=None,
                                       explore=9)  # fmt: skip
     assert (config.loop.iterations, config.loop.explore, config.fit.epochs) == (4, 9, 5)
-    assert config.preset == "quick"
+    assert config.preset == "quick" and config.loop.fidelity == "multi"
     assert SearchConfig.from_preset("no-bilevel", task="t", proposer="x").fit.bilevel is False
 
 
-def test_a_time_budget_without_an_iteration_count_iterates_until_the_budget():
+def test_a_time_budget_iterates_until_the_budget_fitting_every_candidate_in_full():
     timed = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0)
     assert (timed.loop.iterations, timed.budgets.max_seconds) == (UNTIL_BUDGET, 900.0)
+    assert timed.loop.fidelity == "full"
     counted = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0,
-                                       iterations=3)  # fmt: skip
-    assert counted.loop.iterations == 3
+                                       iterations=3, fidelity="multi")  # fmt: skip
+    assert (counted.loop.iterations, counted.loop.fidelity) == (3, "multi")
 
 
 @pytest.mark.parametrize(
