@@ -20,8 +20,10 @@ class Entry:
     order: int = 0  # insertion order: ties go to the earlier candidate
     parameters: dict[str, float] = field(default_factory=dict, compare=False)
 
-    def key(self) -> tuple[float, int]:
-        return (self.loss if math.isfinite(self.loss) else math.inf, self.order)
+    def key(self, parsimony: float = 0.0) -> tuple[float, int]:
+        """Rank key: the loss (inf when not finite) times ``1 + parsimony`` per fitted
+        parameter (see :attr:`~sga_agent.config.LoopConfig.parsimony`), then the order."""
+        return (ranked_loss(self.loss, len(self.parameters), parsimony), self.order)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready id, loss (an infinite loss as the string "inf") and validity."""
@@ -29,10 +31,21 @@ class Entry:
         return {"candidate": self.candidate, "loss": loss, "valid": self.valid}
 
 
+def ranked_loss(loss: float, parameters: int, parsimony: float) -> float:
+    """The loss a solution with ``parameters`` fitted parameters ranks by: moved up by a share
+    ``parsimony`` per parameter (a negative loss towards 0)."""
+    if not math.isfinite(loss):
+        return math.inf
+    factor = (1.0 + parsimony) ** parameters
+    return loss * factor if loss >= 0 else loss / factor
+
+
 @dataclass
 class SolutionHeap:
-    """All evaluated solutions, ranked by loss (lower is better)."""
+    """All evaluated solutions, ranked by loss (lower is better), a fitted parameter costing
+    ``parsimony`` of it."""
 
+    parsimony: float = 0.0
     entries: list[Entry] = field(default_factory=list)
 
     def push(
@@ -52,7 +65,7 @@ class SolutionHeap:
 
     def top(self, k: int) -> list[Entry]:
         """The k best entries, best first (valid ones before invalid ones)."""
-        return sorted(self.entries, key=Entry.key)[:k]
+        return sorted(self.entries, key=lambda entry: entry.key(self.parsimony))[:k]
 
     def best(self) -> Entry | None:
         ranked = self.top(1)

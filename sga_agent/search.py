@@ -127,7 +127,7 @@ class Search:
         self._screen_fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self._screened_losses: dict[str, float] = {}  # fingerprint -> valid screen's loss
         self._captured: dict[str, Any] = {}  # fingerprint -> a promoted screen's captured data
-        self.heap = SolutionHeap()
+        self.heap = SolutionHeap(config.loop.parsimony)
         self.totals = Totals(seconds=recorded.seconds)
         self._seconds_before = recorded.seconds  # the run's earlier sessions
         self._started = time.monotonic()

@@ -114,6 +114,10 @@ def from_preset(name: str) -> str:
 @click.option("--promote-rank", type=click.IntRange(min=1), show_default="--top-k",
               help="The bar of promotion (--fidelity multi): a screen is promoted only "
               "below the screen of this rank among the earlier iterations' valid ones.")
+@click.option("--parsimony", type=click.FloatRange(0, 1, max_open=True),
+              show_default="0.01 in quick, 0 in the other presets",
+              help="Share of the loss a fitted parameter must win: solutions rank by loss * "
+              "(1 + parsimony) ** parameters (0: by loss alone).")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
               help="Do not fit parameters: evaluate the proposed defaults.")
 @click.option("--epochs", type=click.IntRange(min=0), show_default="the task's; 5 in quick",

@@ -10,6 +10,7 @@ from typing import Any
 
 from sga_agent.config import current_format
 from sga_agent.events import CandidateEvaluated, ProposalReceived, SandboxReady
+from sga_agent.heap import ranked_loss
 from sga_agent.run_store import CONFIG, SUMMARY, RunStore
 
 
@@ -62,13 +63,19 @@ class Run:
         """Iterations with at least one evaluated candidate, in order."""
         return sorted({candidate.iteration for candidate in self.candidates})
 
+    @property
+    def parsimony(self) -> float:
+        """The run's :attr:`~sga_agent.config.LoopConfig.parsimony` (0 for runs before it)."""
+        return float((self.config.get("loop") or {}).get("parsimony", 0.0))
+
     def ranked(self) -> list[Candidate]:
-        """Scored candidates, best (lowest loss) first; duplicates are left out."""
+        """Scored candidates, best first, as the search ranked them (by loss, a fitted
+        parameter costing :attr:`parsimony` of it); duplicates are left out."""
         scored = [
             c for c in self.candidates
             if c.status == "ok" and math.isfinite(c.loss) and "duplicate_of" not in c.extras
         ]  # fmt: skip
-        return sorted(scored, key=lambda c: c.loss)
+        return sorted(scored, key=lambda c: ranked_loss(c.loss, len(c.parameters), self.parsimony))
 
     @property
     def best(self) -> Candidate | None:
