@@ -119,7 +119,8 @@ def print_result(
     if as_json:
         click.echo(json.dumps(summary))
         return
-    recorded = store.recorded().evaluations
+    run = store.recorded()
+    recorded = run.evaluations
     seed = recorded.get(SEED)
     table = Table("rank", "candidate", "loss", "x below the seed", title=f"top {len(result.top)}")
     for rank, entry in enumerate(result.top, 1):
@@ -139,7 +140,7 @@ def print_result(
         console.print(Syntax(code, "python", theme="ansi_dark", word_wrap=True))
     else:
         console.print("no valid solution was found")
-    console.print(_counts(recorded.values(), result, uses_a_model(config)))
+    console.print(_counts(recorded.values(), run.screens.values(), result, uses_a_model(config)))
     console.print(f"report: sga-agent report {store.path}", soft_wrap=True)
 
 
@@ -172,13 +173,21 @@ def _truth_lines(findings: dict[str, Any]) -> list[str]:
     return [line]
 
 
-def _counts(evaluations: Any, result: SearchResult, spend: bool) -> str:
-    """Evaluations by status (duplicates of earlier code not counted), then the spend."""
-    statuses = Counter(e.status for e in evaluations if "duplicate_of" not in e.extras)
-    parts = ", ".join(f"{count} {status}" for status, count in statuses.most_common())
-    text = f"{sum(statuses.values())} evaluations ({parts})"
+def _counts(evaluations: Any, screens: Any, result: SearchResult, spend: bool) -> str:
+    """Full evaluations by status (duplicates of earlier code not counted), then the screens of
+    a multi-fidelity search by status, then the spend."""
+    text = _by_status("evaluations", evaluations)
+    if screens := list(screens):
+        text += " after " + _by_status("screens", screens)
     if spend:
         text += f", {result.totals.tokens} tokens, ${result.totals.cost_usd:.4f}"
     if result.stopped:
         text += f"; stopped: {result.stopped}"
     return text
+
+
+def _by_status(what: str, evaluations: Any) -> str:
+    """``"N what (n1 ok, n2 unstable)"``, copies of earlier code not counted."""
+    statuses = Counter(e.status for e in evaluations if "duplicate_of" not in e.extras)
+    parts = ", ".join(f"{count} {status}" for status, count in statuses.most_common())
+    return f"{sum(statuses.values())} {what} ({parts})"

@@ -12,6 +12,7 @@ from rich.console import Console
 
 from sga_agent.cli.progress import SearchProgress, print_result
 from sga_agent.config import UNTIL_BUDGET
+from sga_agent.events import CandidateScreened
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search, Totals
 from sga_agent.task import Evaluation
@@ -122,9 +123,21 @@ def test_the_final_screen_compares_with_the_seed_and_shows_the_fitted_law(tmp_pa
 
     assert "best: 01-exploit-00, loss 10, 10x below the seed's 100" in text
     assert "scale: float = 2.5" in text and "scale: float = 1.0" not in text
-    assert "3 evaluations (2 ok, 1 invalid)" in text
+    assert "3 evaluations (2 ok, 1 invalid)\n" in text  # no screens in a full-fidelity run
     assert "tokens" not in text
     assert f"report: sga-agent report {store.path}\n" in text  # one line, whatever the width
     for line in text.splitlines():
         if not line.startswith(("report:", "run folder:")):
             assert len(line) <= width, line
+
+
+def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    answers = [LAW.format(value=10.0), LAW.format(value=20.0)]
+    result = Search(cfg, FakeTask(), Scripted(answers), FittedScale(), store).run()
+    unstable = Evaluation(False, float("inf"), "blew up", status="unstable")
+    store.append(CandidateScreened("01-explore-09", 0.2, unstable.to_dict()))
+    screen = console(WIDTHS[-1])
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    assert "3 evaluations (3 ok) after 1 screens (1 unstable)" in screen.export_text()
