@@ -21,9 +21,12 @@ most probable small forms not yet tried (:mod:`.enumeration`).
 
 In elastic search, new structure must be physically admissible (:mod:`.admissible`: frame
 indifferent, no stress at rest), and most explore children first try the next untried pair of
-admissible forms (:func:`.enumeration.elastic_pairs`). A pair's moduli start near the best
-parent's largest fitted modulus: the stiffness of the body as far as the search knows it (a law
-started far from it may not reach it in one fit, or may blow up the simulation when too stiff).
+admissible forms (:func:`.enumeration.elastic_pairs`). A pair's moduli start where its
+small-strain shear and volume response equal the best admissible parent's (every law reduces
+to linear elasticity at small strain, and the fit has measured that much already); where there
+is no such parent, or the pair cannot match it with positive moduli, both start at the best
+parent's largest fitted modulus. A law started far from the body's stiffness may not reach it
+in one fit, or blow up the simulation when too stiff.
 """
 
 from __future__ import annotations
@@ -38,10 +41,12 @@ from tasks.constitutive.gp import grammar
 from tasks.constitutive.gp.admissible import admissible
 from tasks.constitutive.gp.canonical import Key, form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
+from tasks.constitutive.gp.elastic_forms import RESPONSES
 from tasks.constitutive.gp.enumeration import elastic_pairs, loose_form, small_forms
 from tasks.constitutive.gp.genome import (
     Genome,
     Param,
+    Term,
     random_coefficient,
     random_genome,
     to_json,
@@ -68,7 +73,7 @@ ENUMERATION_SHARE = {"plastic": 0.75, "elastic": 0.75}
 #: Forms of at most this many terms count as enumerated when tried: one-term plastic forms,
 #: the pairs of elastic search.
 ENUMERATED_TERMS = {"plastic": 1, "elastic": 2}
-PAIR_SPREAD = 0.25  # standard deviation of a pair's log-moduli around the fitted stiffness
+PAIR_SPREAD = 0.1  # standard deviation of a pair's log-moduli around their matched values
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
@@ -148,10 +153,10 @@ class GeneticProgrammingProposer:
         forms = {form(genome) for genome in known}
         enumerated = ENUMERATED_TERMS[self.searched]
         listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
-        stiffness = _fitted_stiffness(parents) if self.searched == "elastic" else math.nan
+        reference = _reference(parents) if self.searched == "elastic" else (None, math.nan)
         answers = []
         for _ in range(n):
-            child, note = self._next_small_form(rng, temperature, listed, stiffness) or self._child(
+            child, note = self._next_small_form(rng, temperature, listed, reference) or self._child(
                 rng, pool, temperature, seen, forms
             )
             seen.add(to_json(child))
@@ -162,11 +167,16 @@ class GeneticProgrammingProposer:
         return answers
 
     def _next_small_form(
-        self, rng: random.Random, temperature: float, listed: set[Key], stiffness: float
+        self,
+        rng: random.Random,
+        temperature: float,
+        listed: set[Key],
+        reference: tuple[tuple[float, float] | None, float],
     ) -> tuple[Genome, str] | None:
         """With a chance that grows with temperature, the most probable small form (plastic) or
         pair of forms (elastic) not yet tried, from new starting values (an elastic pair's
-        log-moduli near ``stiffness``); None otherwise or when all are tried."""
+        log-moduli matched to ``reference``, see :func:`_reference`); None otherwise or when
+        all are tried."""
         share = exploration(temperature) * ENUMERATION_SHARE[self.searched]
         if share <= 0 or rng.random() >= share:
             return None
@@ -176,7 +186,7 @@ class GeneticProgrammingProposer:
             if loose_form(genome) in listed:
                 continue
             if elastic:
-                child = _with_moduli(rng, genome, stiffness)
+                child = _with_moduli(rng, genome, _pair_moduli(genome, *reference))
                 return child, f"tried pair of forms {rank} in order of prior probability, untried"
             child = restart(rng, genome, genome, temperature)
             assert child is not None
@@ -228,25 +238,63 @@ class GeneticProgrammingProposer:
                 return genome
 
 
-def _fitted_stiffness(parents: Sequence[Parent]) -> float:
-    """The best parent's largest fitted log-modulus (the seed's default without parents): the
-    body's stiffness as far as the search knows it."""
-    if not parents:
-        return max(term.coefficient.raw for term in seed_genome("elastic").terms)
-    best = min(parents, key=lambda parent: _loss(parent.loss))
-    genome = genome_from_code(best.code, "elastic")
-    if genome is None:  # the seed, or a model's law, stands in as the seed's genome
-        fitted = seed_genome("elastic", best.parameters)
-    else:
-        fitted = with_values(genome, best.parameters)
-    return max(term.coefficient.raw for term in fitted.terms)
+def _reference(parents: Sequence[Parent]) -> tuple[tuple[float, float] | None, float]:
+    """What the search knows of the body's stiffness: the small-strain response (shear,
+    volume) of the best admissible parent whose terms are all listed forms (:data:`RESPONSES`),
+    or None; and the best parent's largest fitted log-modulus (the seed's default without
+    parents). The linear seed is no reference: it does not turn with the body, and its fit
+    can trade the volume response for the shear one (a Poisson's ratio of -0.2)."""
+    members = [(_loss(p.loss), _fitted_genome(p)) for p in parents]
+    members.sort(key=lambda member: member[0])
+    if not members:
+        return None, max(term.coefficient.raw for term in seed_genome("elastic").terms)
+    stiffness = max(term.coefficient.raw for term in members[0][1].terms)
+    for _, genome in members:
+        keys = [_term_key(term) for term in genome.terms]
+        if admissible(genome) and all(key in RESPONSES for key in keys):
+            shear = sum(math.exp(t.coefficient.raw) * RESPONSES[k][0] for t, k in zip(
+                genome.terms, keys, strict=True))  # fmt: skip
+            volume = sum(math.exp(t.coefficient.raw) * RESPONSES[k][1] for t, k in zip(
+                genome.terms, keys, strict=True))  # fmt: skip
+            return (shear, volume), stiffness
+    return None, stiffness
 
 
-def _with_moduli(rng: random.Random, genome: Genome, stiffness: float) -> Genome:
-    """``genome`` with each term's log-modulus drawn around ``stiffness``."""
+def _fitted_genome(parent: Parent) -> Genome:
+    """An elastic parent's genome at its fitted values (the seed's, or a model's law, as the
+    seed's genome)."""
+    genome = genome_from_code(parent.code, "elastic")
+    if genome is None:
+        return seed_genome("elastic", parent.parameters)
+    return with_values(genome, parent.parameters)
+
+
+def _term_key(term: Term) -> str:
+    return to_json(Genome("elastic", (replace(term, coefficient=Param("log", 0.0)),)))
+
+
+def _pair_moduli(
+    pair: Genome, reference: tuple[float, float] | None, stiffness: float
+) -> tuple[float, float]:
+    """Log-moduli of ``pair`` whose small-strain response is ``reference``; both at
+    ``stiffness`` where there is no reference or no positive solution."""
+    if reference is not None:
+        (g1, v1), (g2, v2) = (RESPONSES[_term_key(term)] for term in pair.terms)
+        shear, volume = reference
+        determinant = g1 * v2 - g2 * v1
+        if abs(determinant) > 1e-9:
+            first = (shear * v2 - g2 * volume) / determinant
+            second = (g1 * volume - shear * v1) / determinant
+            if first > 0 and second > 0:
+                return math.log(first), math.log(second)
+    return stiffness, stiffness
+
+
+def _with_moduli(rng: random.Random, genome: Genome, moduli: tuple[float, float]) -> Genome:
+    """``genome`` with its terms' log-moduli drawn around ``moduli``."""
     terms = tuple(
-        replace(term, coefficient=Param("log", round(rng.gauss(stiffness, PAIR_SPREAD), 4)))
-        for term in genome.terms
+        replace(term, coefficient=Param("log", round(rng.gauss(modulus, PAIR_SPREAD), 4)))
+        for term, modulus in zip(genome.terms, moduli, strict=True)
     )
     return replace(genome, terms=terms)
 
@@ -274,6 +322,7 @@ def _tournament(rng: random.Random, pool: list[_Member], size: int) -> _Member:
     """The best of ``size`` members drawn without replacement (ties: the earlier one)."""
     drawn = sorted(rng.sample(range(len(pool)), min(size, len(pool))))
     return min((pool[i] for i in drawn), key=lambda member: member.loss)
+
 
 
 def _answer(code: str, note: str) -> str:

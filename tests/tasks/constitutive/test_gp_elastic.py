@@ -28,7 +28,7 @@ from tasks.constitutive.gp.admissible import (
     frame,
 )
 from tasks.constitutive.gp.codegen import genome_from_code, law_code
-from tasks.constitutive.gp.elastic_forms import FORMS
+from tasks.constitutive.gp.elastic_forms import FORMS, RESPONSES
 from tasks.constitutive.gp.enumeration import elastic_pairs, loose_form
 from tasks.constitutive.gp.genome import Genome, Node, Param, Term, fits, random_genome, to_json
 from tasks.constitutive.gp.proposer import CONSTANT_MOVES, DESCRIPTIONS, PAIR_SPREAD
@@ -160,6 +160,31 @@ def test_explore_children_try_the_pairs_in_order_at_the_fitted_stiffness():
     moduli = [term.coefficient.raw for pair in pairs for term in pair.terms]
     assert abs(sum(moduli) / len(moduli) - stiffness) < PAIR_SPREAD
     assert not any(rank.search(a) for a in proposer.propose_from([seed_parent()], 0.5, 12, 1))
+
+
+def test_pairs_start_with_the_small_strain_response_of_the_best_admissible_parent():
+    hencky = Genome("elastic", (Term(Param("log", 13.8), PRESSURE),
+                                Term(Param("log", 12.7), Node("spatial", (Node("dev", (eps,)),)))))
+    known = Parent(law_code(hencky), 1e-7, {})
+    shear, volume = 0.5 * math.exp(12.7), math.exp(13.8)  # its response, from the table
+    answers = GeneticProgrammingProposer("elastic").propose_from(
+        [seed_parent(1e-5), known], 1.0, 16, seed=4)
+    matched = 0
+    for answer in answers:
+        pair = genome_from_code(parse_response(answer).code, "elastic")
+        if "tried pair of forms" not in answer or pair is None:
+            continue
+        responses = [RESPONSES[to_json(Genome("elastic", (Term(Param("log", 0.0), t.expr),)))]
+                     for t in pair.terms]  # fmt: skip
+        moduli = [math.exp(t.coefficient.raw) for t in pair.terms]
+        got = [sum(m * r[i] for m, r in zip(moduli, responses, strict=True)) for i in (0, 1)]
+        determinant = responses[0][0] * responses[1][1] - responses[1][0] * responses[0][1]
+        if abs(determinant) > 1e-9 and all(m > 0 for m in moduli):
+            # noise of PAIR_SPREAD on each log-modulus: within a factor e^(4 spread)
+            assert abs(math.log(got[0] / shear)) < 4 * PAIR_SPREAD, (answer, got)
+            assert abs(math.log(got[1] / volume)) < 4 * PAIR_SPREAD, (answer, got)
+            matched += 1
+    assert matched >= 4
 
 
 def test_new_elastic_structure_is_admissible():
