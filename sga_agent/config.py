@@ -33,14 +33,14 @@ if TYPE_CHECKING:
 #: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off. All but
 #: "quick" are the columns of the paper's Table 1; "quick" is the default of the LLM-free
 #: built-in proposers: a short run (25 candidates, 5 inner epochs) that shows the pipeline,
-#: screening each candidate and fitting the promising in full (the same best law in less time
-#: than full fits of all: ``benchmarks/search_speed.py``), and preferring the law with fewer
-#: constants where two are within 1 % a constant (``benchmarks/discovery.py``, observed
-#: neo-Hookean: a three-constant law 0.07 % below the true form held out worse).
+#: preferring the law with fewer constants where two are within 1 % a constant
+#: (``benchmarks/discovery.py``, observed neo-Hookean: a three-constant law 0.07 % below the
+#: true form held out worse). The command line also screens its candidates where the task
+#: screens cheaply (:func:`quick_fidelity`).
 PRESETS: dict[str, dict[str, Any]] = {
     "quick": {
         "iterations": 4, "top_k": 5, "exploit": 2, "explore": 4, "bilevel": True, "epochs": 5,
-        "fidelity": "multi", "parsimony": 0.01,
+        "parsimony": 0.01,
     },
     "sga": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": True},
     "no-bilevel": {"iterations": 5, "top_k": 5, "exploit": 4, "explore": 12, "bilevel": False},
@@ -54,10 +54,17 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Iterations of a preset's search given a wall-time budget and no iteration count: as many
 #: as the budget allows (a bound no search reaches).
 UNTIL_BUDGET = 1_000_000
-#: What a wall-time budget changes in a preset, where the settings do not say: as many
-#: iterations as the budget allows, and full fits for every candidate (at equal wall time the
-#: full fits found the better law: ``benchmarks/fidelity.py``).
-UNDER_BUDGET: dict[str, Any] = {"iterations": UNTIL_BUDGET, "fidelity": "full"}
+
+
+def quick_fidelity(preset: str, settings: dict[str, Any], screens_cheaply: bool) -> str | None:
+    """The fidelity a search gets when ``settings`` name none: ``multi`` for the ``quick``
+    preset without a time budget on a task that screens cheaply (the same best law in less
+    time than full fits of all: ``benchmarks/search_speed.py``), else None (the preset's). A
+    budgeted search fits every candidate in full: at equal wall time the full fits found the
+    better law (``benchmarks/fidelity.py``)."""
+    if settings.get("fidelity") is not None or preset != "quick" or not screens_cheaply:
+        return settings.get("fidelity")
+    return "multi" if settings.get("max_seconds") is None else None
 
 #: Full fits only, or screens and full fits of the promoted (:class:`LoopConfig`).
 FIDELITIES = ("full", "multi")
@@ -374,8 +381,8 @@ class SearchConfig:
     @classmethod
     def from_preset(cls, preset: str, **settings: Any) -> SearchConfig:
         """The preset's values, overridden by ``settings`` (flat names) that are not None; with
-        a wall-time budget (``max_seconds``), :data:`UNDER_BUDGET` where ``settings`` do not
-        say (the search iterates until the budget, fitting every candidate in full)."""
+        a wall-time budget (``max_seconds``) and no ``iterations``, the search iterates until
+        the budget (:data:`UNTIL_BUDGET`)."""
         if preset not in PRESETS:
             close = difflib.get_close_matches(preset, PRESETS, n=1)
             hint = f" Did you mean {close[0]!r}?" if close else ""
@@ -383,9 +390,8 @@ class SearchConfig:
                 f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.{hint}"
             )
         values = {**PRESETS[preset], "preset": preset}
-        if settings.get("max_seconds") is not None:
-            values.update({key: value for key, value in UNDER_BUDGET.items()
-                           if settings.get(key) is None})  # fmt: skip
+        if settings.get("max_seconds") is not None and settings.get("iterations") is None:
+            values["iterations"] = UNTIL_BUDGET
         values.update({key: value for key, value in settings.items() if value is not None})
         return cls.from_settings(**values)
 

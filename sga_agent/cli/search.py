@@ -25,12 +25,13 @@ from sga_agent.config import (
     ConfigError,
     SearchConfig,
     default,
+    quick_fidelity,
 )
 from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunFolderFull, RunStore, RunStoreError
-from sga_agent.task import TaskBase, configured
+from sga_agent.task import TaskBase, as_task, configured
 
 
 class SearchCommand(click.Command):
@@ -99,7 +100,8 @@ def from_preset(name: str) -> str:
 @click.option("--t-explore", "explore_temperature", type=click.FloatRange(0, 2),
               show_default=str(default("explore_temperature")), help="Explore temperature T_h.")
 @click.option("--fidelity", type=click.Choice(FIDELITIES),
-              show_default="multi in quick, full in the other presets and with --time-budget",
+              show_default="multi in quick on a task that screens cheaply (the constitutive "
+              "tasks) without --time-budget, else full",
               help="full: every candidate gets the full fit; multi: each is screened by a "
               "cheaper fit and the best --promote share of each iteration's screens gets the "
               "full fit (only full fits are ranked and shown).")
@@ -181,6 +183,7 @@ def search(
     options = typed_task_options(loaded, task_options, proposer)
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
+    settings["fidelity"] = quick_fidelity(preset, settings, as_task(loaded).screens_cheaply)
     try:
         config = SearchConfig.from_preset(
             preset, task=task, proposer=proposer, api_base=api_base, task_options=options,

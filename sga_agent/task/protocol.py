@@ -103,6 +103,10 @@ class TaskBase:
     #: Options a run whose proposer is this task's built-in one uses unless it sets them
     #: itself, as ``--option`` texts (``{"optimizer": "lbfgs"}``). Default: none.
     builtin_options: ClassVar[Mapping[str, str]] = MappingProxyType({})
+    #: Whether :meth:`evaluate` honours ``EvaluationSettings.fidelity`` below 1 with a cheaper
+    #: fit. The ``quick`` preset then screens its candidates (``--fidelity multi``) unless the
+    #: command says otherwise or gives a time budget. Default: False (a screen costs a full fit).
+    screens_cheaply: ClassVar[bool] = False
     #: Modules the capture server imports once, before it confines any capture (torch, the
     #: task's own capture module): a confined capture may be unable to import them.
     capture_modules: ClassVar[tuple[str, ...]] = ()

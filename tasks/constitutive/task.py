@@ -37,6 +37,7 @@ class ConstitutiveTask(TaskBase):
     #: tools fit theirs with quasi-Newton steps (with Adam's few small steps at a short budget, a
     #: child's constants barely move; ``--option optimizer=adam`` restores it).
     builtin_options = MappingProxyType({"optimizer": "lbfgs"})
+    screens_cheaply = True  # fewer epochs on fewer segments (tasks/constitutive/fidelity.py)
     loss_label = report.LOSS_LABEL
     #: Whether the report draws the observation beside the best law's free run.
     draws_motion = True

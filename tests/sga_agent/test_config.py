@@ -24,6 +24,7 @@ from sga_agent.config import (
     current_format,
     default,
     flat_settings,
+    quick_fidelity,
 )
 from sga_agent.run_store import RunStore
 from sga_agent.search import Totals
@@ -68,17 +69,29 @@ def test_presets_give_their_values_and_settings_that_are_not_none_win():
     config = SearchConfig.from_preset("quick", task="t", proposer="builtin", iterations=None,
                                       explore=9)  # fmt: skip
     assert (config.loop.iterations, config.loop.explore, config.fit.epochs) == (4, 9, 5)
-    assert config.preset == "quick" and config.loop.fidelity == "multi"
+    assert config.preset == "quick" and config.loop.fidelity == "full"
     assert SearchConfig.from_preset("no-bilevel", task="t", proposer="x").fit.bilevel is False
 
 
-def test_a_time_budget_iterates_until_the_budget_fitting_every_candidate_in_full():
+def test_a_time_budget_without_an_iteration_count_iterates_until_the_budget():
     timed = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0)
     assert (timed.loop.iterations, timed.budgets.max_seconds) == (UNTIL_BUDGET, 900.0)
-    assert timed.loop.fidelity == "full"
     counted = SearchConfig.from_preset("quick", task="t", proposer="builtin", max_seconds=900.0,
-                                       iterations=3, fidelity="multi")  # fmt: skip
-    assert (counted.loop.iterations, counted.loop.fidelity) == (3, "multi")
+                                       iterations=3)  # fmt: skip
+    assert counted.loop.iterations == 3
+
+
+def test_the_quick_preset_screens_only_where_a_screen_is_cheap_and_no_budget_is_given():
+    assert quick_fidelity("quick", {}, screens_cheaply=True) == "multi"
+    assert quick_fidelity("quick", {"max_seconds": 900.0}, screens_cheaply=True) is None
+    assert quick_fidelity("quick", {}, screens_cheaply=False) is None
+    assert quick_fidelity("sga", {}, screens_cheaply=True) is None
+    assert quick_fidelity("quick", {"fidelity": "full"}, screens_cheaply=True) == "full"
+    assert quick_fidelity("sga", {"fidelity": "multi"}, screens_cheaply=False) == "multi"
+    from tasks.constitutive.task import GranularTask
+    from tasks.observed.task import ObservedTask
+
+    assert GranularTask.screens_cheaply and not ObservedTask.screens_cheaply
 
 
 @pytest.mark.parametrize(
