@@ -66,6 +66,7 @@ def quick_fidelity(preset: str, settings: dict[str, Any], screens_cheaply: bool)
         return settings.get("fidelity")
     return "multi" if settings.get("max_seconds") is None else None
 
+
 #: Full fits only, or screens and full fits of the promoted (:class:`LoopConfig`).
 FIDELITIES = ("full", "multi")
 #: Where candidates are evaluated: this machine's process pool, or a Ray cluster.

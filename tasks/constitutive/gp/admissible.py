@@ -70,8 +70,8 @@ def _matrix(expr: Node, arg_types: tuple[str, ...]) -> Frame:
         return _TRANSPOSED.get(args[0])
     if expr.op in ("scale", "smul"):
         return args[1] if args[0] == INVARIANT else None
-    if expr.op in ("add", "sub", "blend"):
-        return _common(args[-2:]) if expr.op != "blend" or args[0] == INVARIANT else None
+    if expr.op in ("add", "sub", "blend"):  # a blend's weight is a parameter: invariant
+        return _common(args[-2:])
     if expr.op == "matmul":
         a, b = args
         if a == ISOTROPIC or b == ISOTROPIC:

@@ -153,7 +153,7 @@ class GeneticProgrammingProposer:
         forms = {form(genome) for genome in known}
         enumerated = ENUMERATED_TERMS[self.searched]
         listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
-        reference = _reference(parents) if self.searched == "elastic" else (None, math.nan)
+        reference = _reference(pool) if self.searched == "elastic" else (None, math.nan)
         answers = []
         for _ in range(n):
             child, note = self._next_small_form(rng, temperature, listed, reference) or self._child(
@@ -238,35 +238,25 @@ class GeneticProgrammingProposer:
                 return genome
 
 
-def _reference(parents: Sequence[Parent]) -> tuple[tuple[float, float] | None, float]:
-    """What the search knows of the body's stiffness: the small-strain response (shear,
-    volume) of the best admissible parent whose terms are all listed forms (:data:`RESPONSES`),
-    or None; and the best parent's largest fitted log-modulus (the seed's default without
-    parents). The linear seed is no reference: it does not turn with the body, and its fit
-    can trade the volume response for the shear one (a Poisson's ratio of -0.2)."""
-    members = [(_loss(p.loss), _fitted_genome(p)) for p in parents]
-    members.sort(key=lambda member: member[0])
-    if not members:
-        return None, max(term.coefficient.raw for term in seed_genome("elastic").terms)
-    stiffness = max(term.coefficient.raw for term in members[0][1].terms)
-    for _, genome in members:
+def _reference(pool: list[_Member]) -> tuple[tuple[float, float] | None, float]:
+    """What the search knows of the body's stiffness, from the parents at their fitted values:
+    the small-strain response (shear, volume) of the best admissible one whose terms are all
+    listed forms (:data:`RESPONSES`), or None; and the best one's largest log-modulus. The
+    linear seed is no reference: it does not turn with the body, and its fit can trade the
+    volume response for the shear one (a Poisson's ratio of -0.2)."""
+    ranked = sorted(pool, key=lambda member: member.loss)
+    stiffness = max(term.coefficient.raw for term in ranked[0].genome.terms)
+    for member in ranked:
+        genome = member.genome
         keys = [_term_key(term) for term in genome.terms]
         if admissible(genome) and all(key in RESPONSES for key in keys):
-            shear = sum(math.exp(t.coefficient.raw) * RESPONSES[k][0] for t, k in zip(
-                genome.terms, keys, strict=True))  # fmt: skip
-            volume = sum(math.exp(t.coefficient.raw) * RESPONSES[k][1] for t, k in zip(
-                genome.terms, keys, strict=True))  # fmt: skip
+            moduli = [math.exp(term.coefficient.raw) for term in genome.terms]
+            shear, volume = (
+                sum(m * RESPONSES[k][i] for m, k in zip(moduli, keys, strict=True))
+                for i in (0, 1)
+            )
             return (shear, volume), stiffness
     return None, stiffness
-
-
-def _fitted_genome(parent: Parent) -> Genome:
-    """An elastic parent's genome at its fitted values (the seed's, or a model's law, as the
-    seed's genome)."""
-    genome = genome_from_code(parent.code, "elastic")
-    if genome is None:
-        return seed_genome("elastic", parent.parameters)
-    return with_values(genome, parent.parameters)
 
 
 def _term_key(term: Term) -> str:
@@ -322,7 +312,6 @@ def _tournament(rng: random.Random, pool: list[_Member], size: int) -> _Member:
     """The best of ``size`` members drawn without replacement (ties: the earlier one)."""
     drawn = sorted(rng.sample(range(len(pool)), min(size, len(pool))))
     return min((pool[i] for i in drawn), key=lambda member: member.loss)
-
 
 
 def _answer(code: str, note: str) -> str:
