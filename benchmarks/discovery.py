@@ -87,17 +87,24 @@ ROWS: dict[str, Row] = {
 }  # fmt: skip
 #: How every hidden observation is taken: 20 frames, a fifth of the particles, 0.5 % noise.
 OBSERVE = ("--frames", "20", "--subset", "0.2", "--noise", "0.005")
-#: The scene of each observed file: the thrown cube for 400 steps (0.16 s: at its default 150
-#: steps sand had barely flowed, and the seed law was only 60x above the noise floor), and the
-#: paper's spinning cube to validate.
-SCENES = {"observation": ("--steps", "400"), "validation": ("--scene", "paper", "--steps", "400")}
-#: Names the files of this protocol (rows before it observed 150 steps, in files without it).
-PROTOCOL = "400"
+#: The scene of each observed file: the paper's spinning cube for its 1000 steps (the issue's
+#: hidden-observation example), and the thrown cube for 400 steps to validate. No shorter
+#: protocol leaves every material's fitted seed law 100x above the noise floor (the true law's
+#: loss), as the search's fit settings put it: thrown cube, 150 steps, sand 60x; 200 steps,
+#: neo-Hookean 6x; 400 steps, neo-Hookean 30x; paper's cube, 400 steps, sand 58x. Over 1000
+#: steps: sand 1.9e3x, von Mises 4.2e3x, neo-Hookean 1.0e3x (floor 5.05e-6).
+SCENES = {"observation": ("--scene", "paper", "--steps", "1000"),
+          "validation": ("--steps", "400")}  # fmt: skip
+#: Names the files of this protocol (earlier rows observed the thrown cube for 150 steps, in
+#: files without it, or for 400, in files named ``-400``).
+PROTOCOL = "paper-1000"
+#: What the results file records of this protocol's observation.
+OBSERVED = {"observed_scene": "paper", "observed_steps": 1000}
 
 
 def observation_files(name: str, row: Row) -> dict[str, str]:
-    """The ``observed`` row's options naming its observation (the thrown cube, 400 steps) and
-    its validation (the paper's spinning cube, 400 steps, same material), written once."""
+    """The ``observed`` row's options naming its observation (the paper's spinning cube, 1000
+    steps) and its validation (the thrown cube, 400 steps, same material), written once."""
     OBSERVATIONS.mkdir(parents=True, exist_ok=True)
     files = {}
     for option, scene in SCENES.items():
@@ -199,7 +206,7 @@ def run_row(args: argparse.Namespace) -> None:
         "best_solution": findings.get("best_solution"),
     }  # fmt: skip
     if row.observation:
-        record["observed_steps"] = int(PROTOCOL)
+        record |= OBSERVED
     results = Path(args.results)
     results.parent.mkdir(parents=True, exist_ok=True)
     with results.open("a") as out:
@@ -217,6 +224,14 @@ def _commit(tree: Path) -> str:
                               ":(exclude)benchmarks/results"], capture_output=True)  # fmt: skip
     commit = done.stdout.strip() or "unknown"
     return commit + ("-dirty" if changed.returncode == 1 else "")
+
+
+def _observed(record: dict[str, Any]) -> str:
+    """How an observed row's file was taken, as the table names it ("" for the other rows)."""
+    if "observed_steps" not in record:
+        return ""
+    scene = record.get("observed_scene", "thrown")
+    return f" ({scene}, {record['observed_steps']} steps)"
 
 
 def _number(value: Any, digits: str = ".3g") -> str:
@@ -247,7 +262,7 @@ def table(path: Path = RESULTS) -> str:
         gain = None
         if r["best"] not in (None, "inf") and r.get("seed_loss") not in (None, "inf"):
             gain = float(r["seed_loss"]) / float(r["best"])
-        name = r["row"] + (f" ({r['observed_steps']} steps)" if "observed_steps" in r else "")
+        name = r["row"] + _observed(r)
         lines.append(
             f"| {name} | {r['seed']} | {r['label']} | {r['commit']} | {_number(r['best'])} "
             f"| {_number(gain)} | {_number(r['truth'])} | {_number(r['fitted_truth'])} "
