@@ -25,7 +25,7 @@ from sga_agent.config import (
     ConfigError,
     SearchConfig,
     default,
-    quick_fidelity,
+    quick_screening,
 )
 from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
@@ -106,14 +106,15 @@ def from_preset(name: str) -> str:
               "cheaper fit and the best --promote share of each iteration's screens gets the "
               "full fit (only full fits are ranked and shown).")
 @click.option("--screen-fidelity", type=click.FloatRange(0, 1, min_open=True, max_open=True),
-              show_default=str(default("screen_fidelity")),
+              show_default=f"{default('screen_fidelity')}; 0.2 in quick without --time-budget",
               help="The screen's share of the full fit's work (--fidelity multi).")
 @click.option("--promote", type=click.FloatRange(0, 1, min_open=True),
               show_default=str(default("promote")),
               help="Share of an iteration's valid screens promoted to the full fit "
               "(--fidelity multi; rounded up, at least one), of those below the bar of "
               "--promote-rank.")
-@click.option("--promote-rank", type=click.IntRange(min=1), show_default="--top-k",
+@click.option("--promote-rank", type=click.IntRange(min=1),
+              show_default=f"{default('promote_rank')}; --top-k in quick without --time-budget",
               help="The bar of promotion (--fidelity multi): a screen is promoted only "
               "below the screen of this rank among the earlier iterations' valid ones.")
 @click.option("--parsimony", type=click.FloatRange(0, 1, max_open=True),
@@ -183,7 +184,7 @@ def search(
     options = typed_task_options(loaded, task_options, proposer)
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
-    settings["fidelity"] = quick_fidelity(preset, settings, as_task(loaded).screens_cheaply)
+    settings |= quick_screening(preset, settings, as_task(loaded).screens_cheaply)
     try:
         config = SearchConfig.from_preset(
             preset, task=task, proposer=proposer, api_base=api_base, task_options=options,

@@ -24,7 +24,7 @@ from sga_agent.config import (
     current_format,
     default,
     flat_settings,
-    quick_fidelity,
+    quick_screening,
 )
 from sga_agent.run_store import RunStore
 from sga_agent.search import Totals
@@ -82,12 +82,17 @@ def test_a_time_budget_without_an_iteration_count_iterates_until_the_budget():
 
 
 def test_the_quick_preset_screens_only_where_a_screen_is_cheap_and_no_budget_is_given():
-    assert quick_fidelity("quick", {}, screens_cheaply=True) == "multi"
-    assert quick_fidelity("quick", {"max_seconds": 900.0}, screens_cheaply=True) is None
-    assert quick_fidelity("quick", {}, screens_cheaply=False) is None
-    assert quick_fidelity("sga", {}, screens_cheaply=True) is None
-    assert quick_fidelity("quick", {"fidelity": "full"}, screens_cheaply=True) == "full"
-    assert quick_fidelity("sga", {"fidelity": "multi"}, screens_cheaply=False) == "multi"
+    screening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": 5}
+    assert quick_screening("quick", {}, screens_cheaply=True) == screening
+    assert quick_screening("quick", {"top_k": 3}, screens_cheaply=True)["promote_rank"] == 3
+    # what the user set stays: an explicit multi keeps the quick screening's other settings
+    assert quick_screening("quick", {"fidelity": "multi", "screen_fidelity": 0.5},
+                           screens_cheaply=False) == {"promote_rank": 5}  # fmt: skip
+    assert quick_screening("quick", {"max_seconds": 900.0}, screens_cheaply=True) == {}
+    assert quick_screening("quick", {}, screens_cheaply=False) == {}
+    assert quick_screening("sga", {}, screens_cheaply=True) == {}
+    assert quick_screening("quick", {"fidelity": "full"}, screens_cheaply=True) == {}
+    assert quick_screening("sga", {"fidelity": "multi"}, screens_cheaply=False) == {}
     from tasks.constitutive.task import GranularTask
     from tasks.observed.task import ObservedTask
 

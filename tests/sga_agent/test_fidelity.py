@@ -165,13 +165,14 @@ def test_later_screens_are_promoted_only_below_the_k_th_best_earlier_screen(tmp_
     # iteration 1's screens: 0.003 to 0.009, the third best (K = 3) 0.006
     second = [law(4.0, screen=0.004), law(6.1, screen=0.0061), law(7.5, screen=0.0075),
               law(8.5, screen=0.0085), law(9.5, screen=0.0095), law(10.0, screen=0.01)]  # fmt: skip
-    _, store, _ = run(tmp_path, ANSWERS[:6] + second)
+    _, store, _ = run(tmp_path, ANSWERS[:6] + second, promote_rank=None)  # None: the bar at K
     # a quarter of six, rounded up, is two: 0.004 and 0.0061, of which only the first < 0.006
     assert sorted(by_type(store, "evaluation")) == sorted(
         [SEED, "01-exploit-01", "01-explore-01", "02-exploit-00"]
     )
-    # with the bar at the best earlier screen (0.003), none of iteration 2 is fitted in full
-    _, store, _ = run(tmp_path / "rank-1", ANSWERS[:6] + second, promote_rank=1)
+    # with the bar at the best earlier screen (0.003, the default), none of iteration 2 is
+    # fitted in full
+    _, store, _ = run(tmp_path / "rank-1", ANSWERS[:6] + second)
     assert sorted(by_type(store, "evaluation")) == sorted([SEED, "01-exploit-01", "01-explore-01"])
 
 
@@ -207,6 +208,8 @@ def test_resume_of_a_killed_multi_fidelity_run_continues_where_it_stopped(tmp_pa
 def test_full_fidelity_is_the_default_and_old_configs_load_without_the_setting(tmp_path):
     plain = SearchConfig.from_settings(task="fake", proposer="scripted")
     assert plain.loop.fidelity == "full"
+    # multi's defaults: a screen of a tenth of the fit, promoted only as a possible new best
+    assert (plain.loop.screen_fidelity, plain.loop.promote_rank) == (0.1, 1)
     data = plain.to_dict()
     for name in ("fidelity", "screen_fidelity", "promote", "promote_rank"):
         del data["loop"][name]
