@@ -9,7 +9,9 @@ the original (github.com/PingchuanMa/SGA, Warp + torch) runs through
 ``benchmarks/original_sga.py`` with 1 torch thread. The two alternate, task by task, for
 ``--rounds`` rounds, each run in a fresh process (so its peak memory is its own), and the
 table gives the minimum, median and maximum epoch over all rounds, the ratio of the medians,
-the peak resident memory and the load average around the run. Without ``--original`` only our
+the peak resident memory, our runs' peak anonymous memory (their own heap, without the
+libraries' code pages that every worker on a machine shares) and the load average around the
+run. Without ``--original`` only our
 own numbers are printed. ``--baseline`` adds another checkout of this project (a worktree of an
 earlier commit) to the rotation, run the same way, with its ratio to ours. The original's driver
 covers elastic and plasticine; our own runs cover every constitutive task. ``--profile`` prints
@@ -36,11 +38,13 @@ import functools
 import json
 import math
 import os
+import re
 import resource
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -88,6 +92,8 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, raw: dict[str, s
 
     ensure_runtime("float32")
     baseline_mb = _resident_mb()  # torch, Taichi and the project imported, Taichi started
+    own = AnonymousPeak()
+    own.start()
     data = json.loads(graph.read_text())  # the law's graph: what the fit worker receives
     # compile every kernel, load the ground truth
     evaluator.evaluate(data, EvaluationSettings(epochs=1, options=options))
@@ -115,10 +121,50 @@ def run_one(task: str, epochs: int, profile: bool, graph: Path, raw: dict[str, s
         "epoch_seconds": result.extras["epoch_seconds"][:-1],
         "loss": result.loss,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "own_peak_mb": own.stop(),
         "baseline_mb": baseline_mb,
         # Taichi's share of each epoch (the last entry is the final forward pass)
         "kernel_seconds": clock.by_call[:-1],
     }
+
+
+class AnonymousPeak:
+    """The peak of this process's anonymous memory (``Anonymous`` in /proc's smaps_rollup: its
+    own heap, not the file-backed library pages that the processes on a machine share), polled
+    every ``interval`` seconds by a daemon thread; None without /proc."""
+
+    def __init__(self, interval: float = 0.1) -> None:
+        self.interval = interval
+        self.peak_mb: float | None = None
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> float | None:
+        self._done.set()
+        self._thread.join()
+        return self.peak_mb
+
+    def _poll(self) -> None:
+        while True:
+            current = anonymous_mb()
+            if current is None:
+                return
+            self.peak_mb = max(self.peak_mb or 0.0, current)
+            if self._done.wait(self.interval):
+                return
+
+
+def anonymous_mb() -> float | None:
+    """This process's anonymous memory in MB, None where /proc cannot tell."""
+    try:
+        text = Path("/proc/self/smaps_rollup").read_text(encoding="ascii")
+    except OSError:
+        return None
+    found = re.search(r"^Anonymous:\s+(\d+) kB", text, re.MULTILINE)
+    return int(found.group(1)) / 1024 if found else None
 
 
 class KernelClock:
@@ -180,6 +226,12 @@ def where_the_time_goes(profiler, seconds: float, epochs: int, rows: int = 25) -
     return "\n".join(lines)
 
 
+def _largest(values) -> str:
+    """The largest of the values that are not None, in whole MB, or "-" if there is none."""
+    known = [value for value in values if value is not None]
+    return f"{max(known):.0f}" if known else "-"
+
+
 def _resident_mb() -> float:
     """Current resident memory (Linux /proc; the peak so far elsewhere)."""
     current = resident_mb()
@@ -205,7 +257,8 @@ def run_ours(task: str, epochs: int, profile: bool, threads: int, graph: Path,
     if profile:
         print(out.stderr)
     row = json.loads(out.stdout.strip().splitlines()[-1])
-    return {"epoch_s": row["epoch_seconds"], "peak_mb": row["peak_mb"], "row": row}
+    return {"epoch_s": row["epoch_seconds"], "peak_mb": row["peak_mb"],
+            "own_mb": row.get("own_peak_mb"), "row": row}  # fmt: skip
 
 
 @functools.cache
@@ -347,7 +400,7 @@ def main() -> None:
         + ("; 'busy': beside a process spinning on one core" if args.busy_core else "")
     )
     print(f"{'task':<11} {'impl':<9} {'load':<6} {'s/epoch min / median / max':>27} "
-          f"{'peak MB':>8} {'ours faster (medians)':>22}")  # fmt: skip
+          f"{'peak MB':>8} {'own MB':>7} {'ours faster (medians)':>22}")  # fmt: skip
     labels = [name for name in trees if name not in ("ours", "baseline")]  # the --variant runs
     impls = ("original", "baseline", *labels, "ours")
     for name in labels:
@@ -360,12 +413,14 @@ def main() -> None:
                     continue
                 epochs = [s for run in runs[impl, task, condition] for s in run["epoch_s"]]
                 peak = max(run["peak_mb"] for run in runs[impl, task, condition])
+                own = _largest(run.get("own_mb") for run in runs[impl, task, condition])
                 medians[impl, condition] = statistics.median(epochs)
-                print(f"{task:<11} {impl:<9} {condition:<6} {spread(epochs):>27} {peak:8.0f}")
+                print(f"{task:<11} {impl:<9} {condition:<6} {spread(epochs):>27} {peak:8.0f} "
+                      f"{own:>7}")  # fmt: skip
             for impl in impls[:-1]:
                 if (impl, condition) in medians:
                     ratio = medians[impl, condition] / medians["ours", condition]
-                    print(f"{task:<11} {'':<9} {condition:<6} {'':>27} {'':>8} "
+                    print(f"{task:<11} {'':<9} {condition:<6} {'':>27} {'':>8} {'':>7} "
                           f"{ratio:>10.2f}x vs {impl}")  # fmt: skip
         if args.busy_core:
             for impl in impls:

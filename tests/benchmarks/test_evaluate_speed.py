@@ -1,11 +1,13 @@
 """The side-by-side epoch benchmark's options (``benchmarks/evaluate_speed.py``): which task
-options each configuration of ours runs with. The benchmark itself runs outside CI."""
+options each configuration of ours runs with, and its probe of a run's own memory. The
+benchmark itself runs outside CI."""
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -45,3 +47,18 @@ def test_a_variant_adds_its_options_to_ours_under_its_label():
 def test_a_variant_without_its_own_label_or_a_value_is_refused(text):
     with pytest.raises(SystemExit):
         evaluate_speed.variants([text], {})
+
+
+@pytest.mark.skipif(evaluate_speed.anonymous_mb() is None, reason="needs /proc's smaps_rollup")
+def test_the_own_memory_peak_sees_a_heap_allocation_that_is_freed_again():
+    peak = evaluate_speed.AnonymousPeak(interval=0.01)
+    peak.start()
+    before = evaluate_speed.anonymous_mb()
+    block = bytearray(100 * 2**20)  # 100 MiB of zeros, written: resident
+    block[:: 4096] = b"\1" * len(block[:: 4096])
+    deadline = time.monotonic() + 5
+    while (peak.peak_mb or 0) < before + 90 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    del block
+    assert peak.stop() >= before + 90
+    assert evaluate_speed.anonymous_mb() < before + 50  # freed: the peak kept it, not the process
