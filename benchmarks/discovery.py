@@ -10,12 +10,14 @@ truth", the loss a search that found the right form could reach. Usage::
     python benchmarks/discovery.py run --row granular --seed 0 [--budget 15m]
         [--tree ../before --label before]   # the search of another checkout
     python benchmarks/discovery.py table    # the markdown table of the results file
+    python benchmarks/discovery.py headroom --row observed-sand --scene thrown --steps 150
 
 ``--tree`` runs the search with another checkout's code on ``PYTHONPATH`` (a worktree of an
 earlier commit) and records it under ``--label``; the fitted truth is always this checkout's.
 The ``observed-*`` rows first write their hidden observations (and a second one of the same
 material in another scene, the held-out check) with ``scripts/make_observation.py`` into
-``~/.cache/sga/discovery``.
+``~/.cache/sga/discovery``. ``headroom`` tells, before any row runs, how far above the noise
+floor a row's seed law sits on another observation of the same material.
 """
 
 from __future__ import annotations
@@ -87,34 +89,38 @@ ROWS: dict[str, Row] = {
 }  # fmt: skip
 #: How every hidden observation is taken: 20 frames, a fifth of the particles, 0.5 % noise.
 OBSERVE = ("--frames", "20", "--subset", "0.2", "--noise", "0.005")
-#: The scene of each observed file: the paper's spinning cube for its 1000 steps (the issue's
-#: hidden-observation example), and the thrown cube for 400 steps to validate. No shorter
-#: protocol leaves every material's fitted seed law 100x above the noise floor (the true law's
-#: loss), as the search's fit settings put it: thrown cube, 150 steps, sand 60x; 200 steps,
-#: neo-Hookean 6x; 400 steps, neo-Hookean 30x; paper's cube, 400 steps, sand 58x. Over 1000
-#: steps: sand 1.9e3x, von Mises 4.2e3x, neo-Hookean 1.0e3x (floor 5.05e-6).
-SCENES = {"observation": ("--scene", "paper", "--steps", "1000"),
+#: The observed rows' observation: the paper's spinning cube for its 1000 steps (the issue's
+#: hidden-observation example); the thrown cube for 400 steps validates. No shorter protocol
+#: leaves every material's fitted seed law 100x above the noise floor (``headroom``: thrown
+#: cube, 150 steps, sand 59x; 200 steps, neo-Hookean 6x; 400 steps, neo-Hookean 30x; paper's
+#: cube, 400 steps, sand 58x. Over 1000 steps: sand 1.9e3x, von Mises 4.2e3x, neo-Hookean
+#: 1.0e3x).
+OBSERVED_SCENE, OBSERVED_STEPS = "paper", 1000
+SCENES = {"observation": ("--scene", OBSERVED_SCENE, "--steps", str(OBSERVED_STEPS)),
           "validation": ("--steps", "400")}  # fmt: skip
 #: Names the files of this protocol (earlier rows observed the thrown cube for 150 steps, in
 #: files without it, or for 400, in files named ``-400``).
-PROTOCOL = "paper-1000"
-#: What the results file records of this protocol's observation.
-OBSERVED = {"observed_scene": "paper", "observed_steps": 1000}
+PROTOCOL = f"{OBSERVED_SCENE}-{OBSERVED_STEPS}"
 
 
 def observation_files(name: str, row: Row) -> dict[str, str]:
     """The ``observed`` row's options naming its observation (the paper's spinning cube, 1000
     steps) and its validation (the thrown cube, 400 steps, same material), written once."""
-    OBSERVATIONS.mkdir(parents=True, exist_ok=True)
     files = {}
     for option, scene in SCENES.items():
         path = OBSERVATIONS / f"{name}-{option}-{PROTOCOL}.npz"
-        if not path.exists():
-            command = [sys.executable, str(ROOT / "scripts" / "make_observation.py"), str(path),
-                       *row.observation, *OBSERVE, *scene]  # fmt: skip
-            subprocess.run(command, check=True, capture_output=True, text=True)
+        _observe(row, path, scene)
         files[option] = str(path)
     return files
+
+
+def _observe(row: Row, path: Path, scene: tuple[str, ...]) -> None:
+    """Write the row's hidden observation of ``scene`` to ``path`` unless it is there."""
+    if not path.exists():
+        OBSERVATIONS.mkdir(parents=True, exist_ok=True)
+        command = [sys.executable, str(ROOT / "scripts" / "make_observation.py"), str(path),
+                   *row.observation, *OBSERVE, *scene]  # fmt: skip
+        subprocess.run(command, check=True, capture_output=True, text=True)
 
 
 def truth_code(row: Row) -> str:
@@ -163,17 +169,50 @@ def fitted_truth(row: Row, config: dict[str, Any]) -> dict:
     process (our own law: capturing it here is safe), and its held-out error."""
     from sga_agent.config import SearchConfig
     from sga_agent.registry import load_task
+    from sga_agent.task import as_task
+
+    options_type = as_task(load_task(row.task)).options_type
+    settings = SearchConfig.from_dict(config["config"], options_type).evaluation_settings()
+    loss, findings = _fit(row, settings, truth_code(row))
+    return {"loss": loss, "held_out": held_out_error(findings)}
+
+
+def _fit(row: Row, settings: Any, code: str | None) -> tuple[float, dict[str, Any]]:
+    """Law ``code`` (None: the task's seed) fitted with ``settings`` in this process (our own
+    laws only): its loss and its findings (the true law's loss, the held-out error)."""
+    from sga_agent.registry import load_task
     from sga_agent.task import as_task, configured
 
-    task = as_task(load_task(row.task))
-    settings = SearchConfig.from_dict(config["config"], task.options_type).evaluation_settings()
-    parsed = settings.options
-    task = configured(task, parsed)
-    data = task.capture(truth_code(row))
+    task = configured(as_task(load_task(row.task)), settings.options)
+    data = task.capture(task.seed_solution() if code is None else code)
     evaluation = task.evaluate(data, settings)
     assessment = task.assess({"captured": data, **evaluation.artifacts}, evaluation.parameters,
-                             parsed, True)  # fmt: skip
-    return {"loss": evaluation.loss, "held_out": held_out_error(assessment.to_dict())}
+                             settings.options, True)  # fmt: skip
+    return evaluation.loss, assessment.to_dict()
+
+
+def headroom(args: argparse.Namespace) -> None:
+    """How far above the noise floor an observed row's seed law sits on another observation
+    of its material (``--scene``, ``--steps``): the seed and the true law from its perturbed
+    start, each fitted with the quick preset's settings as the search fits them, beside the
+    true law's own loss (the floor). Chooses a protocol before any row runs."""
+    from sga_agent.config import PRESETS
+    from sga_agent.options import parse_options
+    from sga_agent.registry import load_task
+    from sga_agent.task import EvaluationSettings, as_task
+
+    row = ROWS[args.row]
+    path = OBSERVATIONS / f"{args.row}-headroom-{args.scene}-{args.steps}.npz"
+    _observe(row, path, ("--scene", args.scene, "--steps", str(args.steps)))
+    task = as_task(load_task(row.task))
+    raw = dict(task.builtin_options) | row.options | {"observation": str(path)}
+    settings = EvaluationSettings(epochs=PRESETS["quick"]["epochs"], seed=0,
+                                  options=parse_options(task.options_type, raw, row.task))
+    seed, _ = _fit(row, settings, None)
+    fitted, findings = _fit(row, settings, truth_code(row))
+    floor = float(findings["truth_loss"])
+    print(json.dumps({"row": args.row, "scene": args.scene, "steps": args.steps, "seed": seed,
+                      "fitted_truth": fitted, "truth": floor, "seed_over_floor": seed / floor}))
 
 
 def held_out_error(findings: dict[str, Any]) -> float | None:
@@ -206,7 +245,7 @@ def run_row(args: argparse.Namespace) -> None:
         "best_solution": findings.get("best_solution"),
     }  # fmt: skip
     if row.observation:
-        record |= OBSERVED
+        record |= {"observed_scene": OBSERVED_SCENE, "observed_steps": OBSERVED_STEPS}
     results = Path(args.results)
     results.parent.mkdir(parents=True, exist_ok=True)
     with results.open("a") as out:
@@ -282,12 +321,19 @@ def main() -> None:
     run.add_argument("--budget", default="15m", help="--time-budget of the search")
     run.add_argument("--tree", help="another checkout whose search runs (default: this one)")
     run.add_argument("--label", default="current", help="the column the row belongs to")
+    probe = commands.add_parser("headroom", help="an observed row's seed over the noise floor "
+                                "on another observation of its material")  # fmt: skip
+    probe.add_argument("--row", required=True, choices=[r for r in ROWS if ROWS[r].observation])
+    probe.add_argument("--scene", choices=("thrown", "paper"), default="paper")
+    probe.add_argument("--steps", type=int, default=1000)
     shown = commands.add_parser("table", help="print the results as a markdown table")
     for command in (run, shown):
         command.add_argument("--results", default=str(RESULTS), help="the results file")
     args = parser.parse_args()
     if args.command == "run":
         run_row(args)
+    elif args.command == "headroom":
+        headroom(args)
     else:
         print(table(Path(args.results)))
 
