@@ -49,8 +49,9 @@ class _Product3(torch.autograd.Function):
         (a, transpose_a), (b, transpose_b) = _rows(A), _rows(B)
         product = torch.empty_like(a)
         kernels.product3(a, b, product, transpose_a, transpose_b, serial_loops(a))
-        ctx.save_for_backward(a, b)
-        ctx.transposed = transpose_a, transpose_b
+        # the inputs, not their rows: a row copy of a strided input (a slice of an SVD's
+        # factors, say) would be a tensor of its own in the graph, the input is kept anyway
+        ctx.save_for_backward(A, B)
         return product.reshape(A.shape)
 
     @staticmethod
@@ -58,8 +59,8 @@ class _Product3(torch.autograd.Function):
     def backward(ctx, C_grad: torch.Tensor):
         from bridges import kernels
 
-        a, b = ctx.saved_tensors
-        transpose_a, transpose_b = ctx.transposed
+        A, B = ctx.saved_tensors
+        (a, transpose_a), (b, transpose_b) = _rows(A), _rows(B)
         c_grad, _ = _rows(C_grad.contiguous())
         shape, serial = C_grad.shape, serial_loops(a)
         wants_a, wants_b = ctx.needs_input_grad

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
+from torch.autograd.function import once_differentiable
 
 from bridges.linalg import stable_linalg
 from bridges.step import Transfer, mpm_step
@@ -237,6 +238,7 @@ def trajectory_loss(
                 loss.backward()
         total += loss.item()
         state = state.detached()
+        del loss  # the group's graph: its steps' outputs are freed before the next group runs
     return RolloutResult(total, positions)
 
 
@@ -262,8 +264,7 @@ def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_byte
         return tensor
 
     with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor), stable_linalg():
-        end = rollout.step(previous)
-        ((end.x - previous.x) ** 2).sum()  # the loss term of a step
+        rollout.step(previous)  # a step's loss term keeps nothing of its own (_SquaredError)
     return max(1, budget_bytes // max(1, sum(kept.values()) * segment))
 
 
@@ -290,17 +291,13 @@ def _segment(rollout, state, observed, weights, starts, segment, scale, position
     stop = min(starts[0] + segment, observed.shape[0] - 1)
     length, copies, N = stop - starts[0], len(starts), observed.shape[1]
     first = torch.as_tensor(starts)
-    # targets[s]: the observed positions of every copy after its step s + 1, stacked
-    rows = first[None, :] + torch.arange(1, length + 1)[:, None]
-    targets = observed[rows].reshape(length, copies * N, 3)
-    counted = weights[rows].reshape(length, copies * N, 1)
     errors = []
 
     def record(s: int, st: State) -> None:
         x = st.x.detach().numpy().reshape(copies, N, 3)
         for copy, start in enumerate(starts):
             positions[start + s] = x[copy]
-        errors.append((counted[s - 1] * (st.x - targets[s - 1]) ** 2).sum())
+        errors.append(_SquaredError.apply(st.x, observed, weights, first + s))
 
     try:
         state = rollout.run(state, length, record, batch=copies)
@@ -315,6 +312,26 @@ def _segment(rollout, state, observed, weights, starts, segment, scale, position
         bad = _first_non_finite(positions, starts, length)
         raise UnstableSimulation(f"the simulation became non-finite at step {bad}", bad)
     return loss, state
+
+
+class _SquaredError(torch.autograd.Function):
+    """The weighted squared error of a step's stacked positions ``x`` against the observed
+    frames ``rows`` (one per copy), keeping only references for the reverse: ``x`` is part of
+    the step's output, which the graph holds anyway, and the observed positions and weights
+    are the whole trajectory's, so a step's error costs the graph no memory of its own."""
+
+    @staticmethod
+    def forward(ctx, x, observed, weights, rows):
+        ctx.save_for_backward(x, observed, weights, rows)
+        difference = x - observed[rows].reshape(x.shape)
+        return (weights[rows].reshape(-1, 1) * difference * difference).sum()
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad):
+        x, observed, weights, rows = ctx.saved_tensors
+        difference = x - observed[rows].reshape(x.shape)
+        return 2 * grad * weights[rows].reshape(-1, 1) * difference, None, None, None
 
 
 def _first_non_finite(positions: np.ndarray, starts: list[int], length: int) -> int:
@@ -348,6 +365,7 @@ def _checkpointed(rollout, observed, weights, starts, segment, scale, positions)
             loss = loss + sum((t * g).sum() for t, g in zip(end.tensors(), carried, strict=True))
         loss.backward()
         carried = tuple(torch.zeros_like(t) if t.grad is None else t.grad for t in leaf.tensors())
+        del loss, end  # this segment's graph, before the one before it runs
     return RolloutResult(total, positions)
 
 

@@ -182,6 +182,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
         reset_every=spec.reset_every,
         optimizer=options.optimizer or spec.optimizer,
         graph_memory_mb=options.graph_memory_mb,
+        batch_particles=options.batch_particles,
     )
     result = fit(rollout, law, observed, inner, started)
     if isinstance(result, Evaluation):

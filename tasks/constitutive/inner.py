@@ -43,7 +43,8 @@ class InnerSettings:
     ``clip_norm`` are unused (its steps come from the line search).
 
     The teacher-forced segments of an epoch run as batches of scene copies, as many at a time
-    as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand; at least one).
+    as fit ``graph_memory_mb`` of autograd graph (measured on the law at hand; at least one)
+    and hold at most ``batch_particles`` particles together.
     Without reset states (``Trajectory.states`` None) ``reset_every`` is the length of the
     checkpointed segments the gradient is carried across.
     """
@@ -54,6 +55,7 @@ class InnerSettings:
     reset_every: int = 100
     optimizer: str = "adam"
     graph_memory_mb: float = 250.0
+    batch_particles: int = 5_000
 
     def __post_init__(self) -> None:
         if self.optimizer not in OPTIMIZERS:
@@ -212,7 +214,9 @@ class _Fit:
         start = State.from_arrays(self.observed.states, 0, self.rollout.dtype)
         self.rollout.check_laws(start)  # a law of the wrong shape is reported as such
         budget = int(self.settings.graph_memory_mb * 2**20)
-        return segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
+        fitting = segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
+        allowed = self.settings.batch_particles // self.rollout.scene.num_particles
+        return max(1, min(fitting, allowed))
 
 
 def prepare_optimizer(name: str) -> None:

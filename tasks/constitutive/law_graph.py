@@ -219,6 +219,7 @@ def _compile(law: GraphLaw, graph: LawGraph, dtype: torch.dtype) -> fx.GraphModu
         inputs["node"].append(node)
     built.output(resolve(graph.output))
     _keep_lu_where_used(built)
+    _diagonal_products_as_scaling(built)
     return fx.GraphModule(law, built, class_name="CapturedLaw")
 
 
@@ -231,6 +232,57 @@ def _keep_lu_where_used(graph: fx.Graph) -> None:
         if any(user.target is not operator.getitem or (user.args[1] != 0 and user.users)
                for user in node.users):  # fmt: skip
             node.target = torch.ops.aten._linalg_det.default
+
+
+#: Operations that only re-view a tensor (as ``matmul`` wraps the factors of a product).
+_VIEWS = (torch.ops.aten.view.default, torch.ops.aten.expand.default,
+          torch.ops.aten._unsafe_view.default, torch.ops.aten.reshape.default)  # fmt: skip
+
+
+def _diagonal_products_as_scaling(graph: fx.Graph) -> None:
+    """A product with a diagonal matrix made by ``diag_embed`` (``U @ diag_embed(s) @ Vh``, the
+    usual way back from singular values) scales the other factor's columns (or rows) instead,
+    where the shapes at run time show that it is one (:func:`times_diagonal`): the result is
+    the same, and autograd keeps no tensor of its own for it (the factor and ``s`` are kept by
+    the operations that made them), where a product keeps both of its factors."""
+    for node in list(graph.nodes):
+        if node.target is not batched_product:
+            continue
+        left, right = node.args
+        if (values := _diagonal_of(right)) is not None:
+            node.target, node.args = times_diagonal, (left, right, values, True)
+        elif (values := _diagonal_of(left)) is not None:
+            node.target, node.args = times_diagonal, (right, left, values, False)
+
+
+def _diagonal_of(node: Any) -> fx.Node | None:
+    """The vector ``s`` when ``node`` is ``diag_embed(s)`` (main diagonal, last two dimensions)
+    seen through views only; else None."""
+    while isinstance(node, fx.Node) and node.target in _VIEWS:
+        node = node.args[0]
+    if not isinstance(node, fx.Node) or node.target is not torch.ops.aten.diag_embed.default:
+        return None
+    arguments = dict(zip(("offset", "dim1", "dim2"), node.args[1:], strict=False)) | node.kwargs
+    if (arguments.get("offset", 0), arguments.get("dim1", -2), arguments.get("dim2", -1)) not in (
+        (0, -2, -1), (0, 1, 2)
+    ):  # fmt: skip
+        return None
+    return node.args[0]
+
+
+def times_diagonal(
+    other: torch.Tensor, diagonal: torch.Tensor, values: torch.Tensor, diagonal_right: bool
+) -> torch.Tensor:
+    """``bmm(other, diagonal)`` (or ``bmm(diagonal, other)``) where ``diagonal`` was made
+    from ``values`` by ``diag_embed`` and views: ``other`` scaled by ``values``, column by
+    column (row by row), when ``diagonal`` has the shape of ``diag_embed(values)`` (the views
+    then changed nothing) and ``other`` that of the product; else the product itself."""
+    size = values.shape[-1] if values.dim() == 2 else -1
+    if values.dim() == 2 and diagonal.shape == (values.shape[0], size, size) == other.shape:
+        return other * values.unsqueeze(-2 if diagonal_right else -1)
+    if diagonal_right:
+        return batched_product(other, diagonal)
+    return batched_product(diagonal, other)
 
 
 def _target(op: str) -> Any:

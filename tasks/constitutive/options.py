@@ -13,10 +13,13 @@ class ConstitutiveOptions:
     ``precision``: Taichi's floating-point type (default: the running Taichi's, else float32);
     it must match a Taichi already running in the process.
     ``graph_memory_mb``: autograd graph the inner fit may hold at once (default 250 MB): the
-    teacher-forced segments of an epoch run in batches as large as fit in it (faster, more
-    memory; ``bridges.rollout.segments_per_batch`` measures about 19 MiB per 100-step segment of
-    1000 particles for the elastic task's true law, 46 MiB for plasticine's in torch), in as few
-    batches as fit and as even as they can be.
+    teacher-forced segments of an epoch run in batches of scene copies as large as fit in it
+    (faster, more memory; ``bridges.rollout.segments_per_batch`` measures it on the law at
+    hand), in as few batches as fit and as even as they can be.
+    ``batch_particles``: particles of the copies in one batch at most (default 5,000: five
+    copies of the paper's 1000-particle scene). Larger batches hold more graph for little or
+    no speed: on the elastic task two batches of five copies were as fast as one of ten,
+    for 140 MB less (``benchmarks/evaluate_speed.py``, see docs/benchmarks.md).
     ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
     and one in reverse a step, where the translation covers their operations and agrees with
     torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD;
@@ -32,6 +35,7 @@ class ConstitutiveOptions:
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     graph_memory_mb: float = 250.0
+    batch_particles: int = 5_000
     law_kernels: Literal["no-svd", "svd-inputs", "all", "none"] = "no-svd"
 
     def __post_init__(self) -> None:
@@ -40,4 +44,8 @@ class ConstitutiveOptions:
         if not self.graph_memory_mb > 0:
             raise ValueError(
                 f"option 'graph_memory_mb' must be positive, got {self.graph_memory_mb}"
+            )
+        if self.batch_particles < 1:
+            raise ValueError(
+                f"option 'batch_particles' must be at least 1, got {self.batch_particles}"
             )

@@ -5,6 +5,8 @@ and the gradient of every parameter with segments batched equal those with one s
 (float64, 1e-10 relative), with and without teacher forcing, and with a short last segment.
 """
 
+import gc
+
 import numpy as np
 import pytest
 import torch
@@ -16,6 +18,7 @@ from bridges.rollout import (
     Rollout,
     State,
     _groups,
+    _SquaredError,
     segments_per_batch,
     trajectory_loss,
 )
@@ -146,3 +149,42 @@ def test_the_measured_segment_memory_is_what_a_segment_keeps(name):
     with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor):
         trajectory_loss(rollout, observed[: SEGMENT + 1], resets, segment=SEGMENT, backward=True)
     assert 0.9 * sum(kept.values()) <= measured <= 1.15 * sum(kept.values())
+
+
+def test_a_group_of_segments_is_freed_before_the_next_one_runs():
+    """The steps of one batch of segments (their autograd nodes, and the packed outputs those
+    hold) are gone when the next batch takes its first step: memory holds one batch's graph."""
+    material = MATERIALS["neo_hookean"]
+    scene, observed, resets = _observation(material)
+    plastic, elastic = from_material(material, dtype=torch.float64)
+    rollout = Rollout(scene, plastic, elastic)
+    live_at_step: list[int] = []
+    step = rollout.step
+
+    def counting_step(state, batch=1):
+        gc.collect()
+        live_at_step.append(sum(type(o).__name__ == "_MPMStepBackward" for o in gc.get_objects()))
+        return step(state, batch)
+
+    rollout.step = counting_step
+    trajectory_loss(rollout, observed, resets, segment=SEGMENT, batch=2)
+    # groups: segments 0-1 (20 steps, batch 2), then the short last one alone
+    assert live_at_step[0] == 0 and live_at_step[19] == 19
+    assert live_at_step[20] == 0, "the first group's steps outlive its backward pass"
+
+
+def test_squared_error_gradient_matches_finite_differences():
+    """The step's loss term differentiates its positions exactly (weights and observed frames
+    of each copy from its own row)."""
+    generator = torch.Generator().manual_seed(3)
+    observed = torch.randn(6, 4, 3, generator=generator, dtype=torch.float64)
+    weights = (torch.rand(6, 4, generator=generator, dtype=torch.float64) > 0.3).double()
+    x = torch.randn(8, 3, generator=generator, dtype=torch.float64, requires_grad=True)
+    rows = torch.tensor([1, 4])  # two copies of a 4-particle scene
+
+    def error(x):
+        return _SquaredError.apply(x, observed, weights, rows)
+
+    assert torch.autograd.gradcheck(error, (x,))
+    expected = (weights[rows].reshape(-1, 1) * (x - observed[rows].reshape(8, 3)) ** 2).sum()
+    assert error(x).item() == pytest.approx(expected.item(), rel=1e-14)

@@ -35,6 +35,7 @@ from tasks.constitutive.law_graph import (
     build_law,
     closed_form_det,
     closed_form_inverse,
+    times_diagonal,
 )
 
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
@@ -565,3 +566,63 @@ def test_a_graph_reading_the_lu_factors_of_its_determinant_keeps_atens():
     assert closed_form_det in calls(only_det)
     det = torch.linalg.det(F)
     assert torch.allclose(only_det(F), det.view(-1, 1, 1) ** 2, rtol=1e-13)
+
+
+DIAGONAL_PRODUCTS_LAW = '''
+import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def __init__(self, k: float = 0.3):
+        super().__init__()
+        self.k = nn.Parameter(torch.tensor(k))
+
+    def forward(self, F: torch.Tensor) -> torch.Tensor:
+        U, sigma, Vh = torch.linalg.svd(F)
+        scaled = U @ torch.diag_embed(sigma ** self.k) @ Vh  # a diagonal on the right
+        left = torch.diag_embed(torch.exp(self.k * sigma)) @ F  # and on the left
+        shifted = torch.diag_embed(sigma[:, :2], offset=1) @ F  # not a main diagonal
+        return scaled + left + shifted
+'''
+
+
+def saved_bytes(law: torch.nn.Module, F: torch.Tensor) -> int:
+    """Bytes of the storages autograd keeps for ``law(F)``, F's own excluded."""
+    kept: dict[int, int] = {}
+
+    def count(tensor: torch.Tensor) -> torch.Tensor:
+        storage = tensor.untyped_storage()
+        kept[storage.data_ptr()] = storage.nbytes()
+        return tensor
+
+    F = F.clone().requires_grad_()
+    with torch.autograd.graph.saved_tensors_hooks(count, lambda t: t), stable_linalg():
+        law(F)
+    kept.pop(F.untyped_storage().data_ptr(), None)
+    return sum(kept.values())
+
+
+def test_products_with_a_diagonal_scale_the_other_factor_and_keep_less():
+    """``U @ diag_embed(s)`` and ``diag_embed(s) @ F`` are computed as scalings (the same
+    values and gradients as the law's code), an off-diagonal ``diag_embed`` stays a product,
+    and autograd keeps less for the rebuilt law than for the code's own products."""
+    document = assert_graph_reproduces(DIAGONAL_PRODUCTS_LAW)
+    rebuilt = build_law(document, torch.float64)
+    targets = calls(rebuilt)
+    assert targets.count(times_diagonal) == 2
+    assert targets.count(batched_product) == 2  # the product with Vh, and the shifted one
+    original = load_law(DIAGONAL_PRODUCTS_LAW, torch.float64)
+    F = deformations()
+    assert saved_bytes(rebuilt, F) <= saved_bytes(original, F) - 2 * F.numel() * 8
+
+
+def test_a_diagonal_whose_views_change_its_shape_stays_a_product():
+    """A diagonal that views made into another batch than ``diag_embed`` made (one diagonal
+    expanded to every matrix) is no scaling of the other factor: the product is computed as it
+    stands."""
+    F = deformations(batch=4)
+    values = torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64)  # one diagonal, (1, 3)
+    expanded = torch.diag_embed(values).expand(4, 3, 3)
+    assert torch.equal(times_diagonal(F, expanded, values, True), torch.bmm(F, expanded))
+    assert torch.equal(times_diagonal(F, expanded, values, False), torch.bmm(expanded, F))
