@@ -18,8 +18,8 @@ class ConstitutiveOptions:
     hand), in as few batches as fit and as even as they can be.
     ``batch_particles``: particles of the copies in one batch at most (default 5,000: five
     copies of the paper's 1000-particle scene). Larger batches hold more graph for little or
-    no speed: on the elastic task two batches of five copies were as fast as one of ten,
-    for 140 MB less (``benchmarks/evaluate_speed.py``, see docs/benchmarks.md).
+    no speed: on the elastic task two batches of five copies were as fast as one of ten, at a
+    peak 139 MB lower (``benchmarks/evaluate_speed.py``, docs/benchmarks.md).
     ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
     and one in reverse a step, where the translation covers their operations and agrees with
     torch (:mod:`tasks.constitutive.law_kernel`): ``no-svd`` (default) those without an SVD;
