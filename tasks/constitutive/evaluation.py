@@ -33,7 +33,7 @@ from tasks.constitutive.inner import (
     prepare_optimizer,
 )
 from tasks.constitutive.law_code import describe_error
-from tasks.constitutive.law_graph import LawGraphError, build_law
+from tasks.constitutive.law_graph import GraphLaw, LawGraphError, build_law
 from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.specs import ELASTIC_TRUTH, KNOWN_ELASTIC, ConstitutiveSpec
 
@@ -164,16 +164,9 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     observed = ground_truth(spec, options.steps)
-    if options.law_kernels != "none":
-        F = observed_deformations(observed, dtype)
-        svd, factored = options.law_kernels == "all", options.law_kernels == "svd-inputs"
-        law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
+    compile_law(law, observed, options)
     observed = fidelity.first_segments(observed, spec.reset_every, settings.fidelity)
-    scene = tm.paper_scene(steps=observed.positions.shape[0] - 1)
-    if spec.searched == "elastic":
-        rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
-    else:
-        rollout = Rollout(scene, law, known_elastic_law(dtype))
+    rollout = task_rollout(spec, law, observed.positions.shape[0] - 1)
     inner = InnerSettings(
         epochs=fidelity.screen_epochs(
             spec.epochs if settings.epochs is None else settings.epochs, settings.fidelity
@@ -191,13 +184,34 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     text = "\n\n".join(
         [
             feedback.optimization_text(result, inner),
-            feedback.trajectory_text(result.positions, observed.positions, scene.dt, corners),
+            feedback.trajectory_text(result.positions, observed.positions, rollout.scene.dt,
+                                     corners),
         ]
     )
     evaluation = fitted_evaluation(result, text, started)
     evaluation.extras.update(fidelity=settings.fidelity, epochs=inner.epochs,
                              segments=fidelity.segments(observed, spec.reset_every))  # fmt: skip
     return evaluation
+
+
+def compile_law(law: GraphLaw, observed: Trajectory, options: ConstitutiveOptions) -> None:
+    """Give ``law`` (built in the running Taichi's precision) its Taichi kernels where
+    ``options.law_kernels`` asks for them and the translation agrees with torch on the
+    observation's deformation gradients."""
+    if options.law_kernels == "none":
+        return
+    F = observed_deformations(observed, torch_dtype())
+    svd, factored = options.law_kernels == "all", options.law_kernels == "svd-inputs"
+    law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
+
+
+def task_rollout(spec: ConstitutiveSpec, law: torch.nn.Module, steps: int) -> Rollout:
+    """The paper scene over ``steps`` steps with the searched ``law`` in its place: the
+    elastic law without plasticity, or the plastic law beside the known elastic one."""
+    scene = tm.paper_scene(steps=steps)
+    if spec.searched == "elastic":
+        return Rollout(scene, torch_laws.NoPlasticity(), law)
+    return Rollout(scene, law, known_elastic_law(torch_dtype()))
 
 
 def observed_deformations(observed: Trajectory, dtype: torch.dtype) -> torch.Tensor:

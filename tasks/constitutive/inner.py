@@ -211,12 +211,19 @@ class _Fit:
         return run.loss
 
     def _segments_per_batch(self) -> int:
-        start = State.from_arrays(self.observed.states, 0, self.rollout.dtype)
-        self.rollout.check_laws(start)  # a law of the wrong shape is reported as such
-        budget = int(self.settings.graph_memory_mb * 2**20)
-        fitting = segments_per_batch(self.rollout, start, self.settings.reset_every, budget)
-        allowed = self.settings.batch_particles // self.rollout.scene.num_particles
-        return max(1, min(fitting, allowed))
+        return segments_at_once(self.rollout, self.observed, self.settings)
+
+
+def segments_at_once(rollout: Rollout, observed: Trajectory, settings: InnerSettings) -> int:
+    """Teacher-forced segments a fit of ``observed`` (with reset states) runs as one batch:
+    as many as ``settings.graph_memory_mb`` of graph holds, measured on the rollout's laws from
+    the first reset state, and no more than ``settings.batch_particles`` particles; at least 1."""
+    start = State.from_arrays(observed.states, 0, rollout.dtype)
+    rollout.check_laws(start)  # a law of the wrong shape is reported as such
+    budget = int(settings.graph_memory_mb * 2**20)
+    fitting = segments_per_batch(rollout, start, settings.reset_every, budget)
+    allowed = settings.batch_particles // rollout.scene.num_particles
+    return max(1, min(fitting, allowed))
 
 
 def prepare_optimizer(name: str) -> None:

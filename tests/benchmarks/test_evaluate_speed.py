@@ -5,20 +5,13 @@ benchmark itself runs outside CI."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location(
-    "bench_evaluate_speed", REPO / "benchmarks" / "evaluate_speed.py"
-)
-evaluate_speed = importlib.util.module_from_spec(_spec)
-sys.modules["bench_evaluate_speed"] = evaluate_speed
-_spec.loader.exec_module(evaluate_speed)
+from tests.benchmarks.scripts import load_benchmark
+
+evaluate_speed = load_benchmark("evaluate_speed")
 
 
 def _args(**values) -> argparse.Namespace:

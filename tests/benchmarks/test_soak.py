@@ -3,7 +3,6 @@ the figures it prints from its samples. The soak itself runs outside CI."""
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -12,11 +11,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("bench_soak", REPO / "benchmarks" / "soak.py")
-soak = importlib.util.module_from_spec(_spec)
-sys.modules["bench_soak"] = soak  # its dataclass looks its module up
-_spec.loader.exec_module(soak)
+from tests.benchmarks.scripts import load_benchmark
+
+soak = load_benchmark("soak")
 
 
 def recorder(samples, finished=()) -> object:
