@@ -26,6 +26,8 @@ from pathlib import Path
 
 import torch
 
+from sga_agent.cli.options import key_value_options
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from evaluate_speed import capture  # noqa: E402
@@ -85,6 +87,7 @@ def _saved_tensors(node: torch.autograd.graph.Node) -> list[torch.Tensor]:
 
 def measure(task: str, copies: int, raw_options: dict[str, str], folder: Path) -> StepGraph:
     """One step's graph of ``task``'s 2x-off true law on ``copies`` stacked scene copies."""
+    import taichi_mpm as tm
     from bridges.linalg import stable_linalg
     from bridges.rollout import State
     from bridges.step import torch_dtype
@@ -108,7 +111,7 @@ def measure(task: str, copies: int, raw_options: dict[str, str], folder: Path) -
     law = build_law(graph["law"], dtype)
     observed = ground_truth(spec, options.steps)
     compile_law(law, observed, options)
-    rollout = task_rollout(spec, law, observed.positions.shape[0] - 1)
+    rollout = task_rollout(spec, law, tm.paper_scene(steps=observed.positions.shape[0] - 1))
     reset = min(1, len(observed.states["x"]) - 1)  # a deformed state where there is one
     start = State.stacked([State.from_arrays(observed.states, reset, dtype)] * copies)
     with torch.no_grad(), stable_linalg():
@@ -146,18 +149,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="a task option, as sga-agent evaluate takes it")  # fmt: skip
     args = parser.parse_args(argv)
-    options = dict(_key_value(text) for text in args.option)
+    try:
+        options = key_value_options(args.option)
+    except ValueError as error:
+        raise SystemExit(f"--option: {error}") from None
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as folder:
         for task in args.tasks:
             print(report(measure(task, args.copies, options, Path(folder)), options), flush=True)
-
-
-def _key_value(text: str) -> tuple[str, str]:
-    key, separator, value = text.partition("=")
-    if not separator or not key.strip():
-        raise SystemExit(f"--option {text!r}: write KEY=VALUE, e.g. law_kernels=svd-inputs")
-    return key.strip(), value.strip()
 
 
 if __name__ == "__main__":

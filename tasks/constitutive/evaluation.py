@@ -166,7 +166,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     observed = ground_truth(spec, options.steps)
     compile_law(law, observed, options)
     observed = fidelity.first_segments(observed, spec.reset_every, settings.fidelity)
-    rollout = task_rollout(spec, law, observed.positions.shape[0] - 1)
+    rollout = task_rollout(spec, law, tm.paper_scene(steps=observed.positions.shape[0] - 1))
     inner = InnerSettings(
         epochs=fidelity.screen_epochs(
             spec.epochs if settings.epochs is None else settings.epochs, settings.fidelity
@@ -205,10 +205,9 @@ def compile_law(law: GraphLaw, observed: Trajectory, options: ConstitutiveOption
     law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
 
 
-def task_rollout(spec: ConstitutiveSpec, law: torch.nn.Module, steps: int) -> Rollout:
-    """The paper scene over ``steps`` steps with the searched ``law`` in its place: the
-    elastic law without plasticity, or the plastic law beside the known elastic one."""
-    scene = tm.paper_scene(steps=steps)
+def task_rollout(spec: ConstitutiveSpec, law: torch.nn.Module, scene: tm.Scene) -> Rollout:
+    """``scene`` with the searched ``law`` in its place: the elastic law without plasticity, or
+    the plastic law beside the known elastic one."""
     if spec.searched == "elastic":
         return Rollout(scene, torch_laws.NoPlasticity(), law)
     return Rollout(scene, law, known_elastic_law(torch_dtype()))

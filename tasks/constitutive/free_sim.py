@@ -13,11 +13,9 @@ import numpy as np
 import torch
 
 import taichi_mpm as tm
-from bridges import laws as torch_laws
-from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
-from bridges.step import torch_dtype
+from bridges.rollout import UnstableSimulation, trajectory_loss
 from taichi_mpm.frames import evenly_spaced
-from tasks.constitutive.evaluation import known_elastic_law
+from tasks.constitutive.evaluation import task_rollout
 from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.law_graph import build_law
 from tasks.constitutive.specs import ConstitutiveSpec
@@ -55,11 +53,7 @@ def free_run_in(
     simulated and observed positions, divided by the body's size (the largest side of its
     initial bounding box). An unstable law gives infinite errors.
     """
-    dtype = torch_dtype()
-    if spec.searched == "elastic":
-        rollout = Rollout(scene, torch_laws.NoPlasticity(), law)
-    else:
-        rollout = Rollout(scene, law, known_elastic_law(dtype))
+    rollout = task_rollout(spec, law, scene)
     size = float(np.ptp(observed[0], axis=0).max())
     frames = evenly_spaced(0, scene.steps, FRAMES)
     try:

@@ -185,7 +185,7 @@ class _Fit:
             if observed.states is None:  # no teacher forcing: checkpointed segments
                 batch = 1
             elif backward:
-                self.batch = self.batch or self._segments_per_batch()
+                self.batch = self.batch or segments_at_once(self.rollout, observed, self.settings)
                 batch = self.batch
             else:
                 batch = len(observed.states["x"])
@@ -209,9 +209,6 @@ class _Fit:
             self.failure = f"epoch {epoch}: the gradient of {bad} is not finite"
             return None
         return run.loss
-
-    def _segments_per_batch(self) -> int:
-        return segments_at_once(self.rollout, self.observed, self.settings)
 
 
 def segments_at_once(rollout: Rollout, observed: Trajectory, settings: InnerSettings) -> int:

@@ -277,9 +277,10 @@ def times_diagonal(
     from ``values`` by ``diag_embed`` and views: ``other`` scaled by ``values``, column by
     column (row by row), when ``diagonal`` has the shape of ``diag_embed(values)`` (the views
     then changed nothing) and ``other`` that of the product; else the product itself."""
-    size = values.shape[-1] if values.dim() == 2 else -1
-    if values.dim() == 2 and diagonal.shape == (values.shape[0], size, size) == other.shape:
-        return other * values.unsqueeze(-2 if diagonal_right else -1)
+    if values.dim() == 2:
+        batch, size = values.shape
+        if diagonal.shape == (batch, size, size) == other.shape:
+            return other * values.unsqueeze(-2 if diagonal_right else -1)
     if diagonal_right:
         return batched_product(other, diagonal)
     return batched_product(diagonal, other)

@@ -7,7 +7,7 @@ import torch
 from bridges.laws import from_material
 from bridges.rollout import Rollout, State, segments_per_batch
 from tasks.constitutive.ground_truth import Trajectory
-from tasks.constitutive.inner import InnerSettings, _Fit
+from tasks.constitutive.inner import InnerSettings, segments_at_once
 from tests.bridges.test_equivalence import MATERIALS
 from tests.bridges.test_segment_batching import SEGMENT, _observation
 
@@ -32,7 +32,7 @@ def test_the_batch_is_bounded_by_the_budget_and_the_particles(
         graph_memory_mb=max(segments_in_budget * segment_bytes / 2**20, 1e-9),
         batch_particles=copies_allowed * scene.num_particles + scene.num_particles // 2,
     )
-    assert _Fit(rollout, plastic, trajectory, settings)._segments_per_batch() == expected
+    assert segments_at_once(rollout, trajectory, settings) == expected
 
 
 def test_a_batch_of_no_particles_is_refused():
