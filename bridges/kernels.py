@@ -55,11 +55,15 @@ from taichi_mpm.kernels.transfer_adjoint import (
 shorten_positions_under(Path(__file__).parent)
 
 #: The fields of a packed input row, in order, and their shapes per particle: the state a step
-#: carries (``CARRIED``: x, v, C, F), then the Kirchhoff stress. An output row holds the
-#: carried state alone. The fields' first columns:
+#: carries (``CARRIED``: x, v, C, F), then the Kirchhoff stress. The fields' first columns:
 INPUT_FIELDS = {**CARRIED, "stress": (3, 3)}
 COL_X, COL_V, COL_C, COL_F, COL_STRESS = 0, 3, 6, 15, 24
 STATE_WIDTH, PACKED_WIDTH = 24, 33
+#: A step writes the carried state as two arrays: the motion (x, v, C), which the next step's
+#: reverse reads, in rows of ``MOTION_WIDTH`` with x, v and C at their input columns, and the
+#: trial F in rows of 9, which only the plastic law reads (so the graph need not keep it).
+MOTION_FIELDS = ("x", "v", "C")
+MOTION_WIDTH = COL_F
 
 
 @ti.func
@@ -159,12 +163,13 @@ def _scatter_and_update(packed: ti.template(), grid: ti.template(), box: ti.temp
 class StepKernels:
     """A bridge step's kernels for one precision.
 
-    ``forward(packed, out, grid, box, constants, serial)``: one step, packed (B * N, 33) input
-    -> packed (B * N, 24) output (x, v, C, F_trial).
+    ``forward(packed, motion, trial_F, grid, box, constants, serial)``: one step, packed
+    (B * N, 33) input -> (B * N, 15) ``motion`` (x, v, C) and (B * N, 9) ``trial_F``.
 
-    ``backward(packed, output, output_grad, input_grad, grid, grid_grad, box, constants,
+    ``backward(packed, motion, output_grad, input_grad, grid, grid_grad, box, constants,
     serial)``: a step's reverse, the packed (B * N, 33) ``input_grad`` (dL/d x, v, C, F,
-    stress) from the (B * N, 24) ``output_grad``, given the step's (B * N, 24) ``output``.
+    stress) from the (B * N, 24) ``output_grad`` (x, v, C, F_trial), given the step's
+    (B * N, 15) output ``motion``.
     Redoes P2G and the grid update, then runs the adjoints of G2P, the grid update and P2G in
     turn; ``grid_grad`` holds dL/d(grid mass, momentum, velocity).
 
@@ -183,9 +188,9 @@ def step_kernels(dtype) -> StepKernels:
     Constants = arguments.model_types(dtype).constants
 
     @ti.kernel
-    def step_forward(packed: ti.types.ndarray(), out: ti.types.ndarray(), grid: Grid,
-                     box: ti.types.ndarray(), constants: Constants,
-                     serial: ti.template()):  # fmt: skip
+    def step_forward(packed: ti.types.ndarray(), motion: ti.types.ndarray(),
+                     trial_F: ti.types.ndarray(), grid: Grid, box: ti.types.ndarray(),
+                     constants: Constants, serial: ti.template()):  # fmt: skip
         _scatter_and_update(packed, grid, box, constants, serial)
         B = grid.mass.shape[0]
         N = packed.shape[0] // B
@@ -195,13 +200,13 @@ def step_kernels(dtype) -> StepKernels:
             new_x, new_v, new_C, new_F = g2p_particle(_vec(packed, row, COL_X),
                                                       _mat(packed, row, COL_F), grid.velocity, b,
                                                       constants)  # fmt: skip
-            _put_vec(out, row, COL_X, new_x)
-            _put_vec(out, row, COL_V, new_v)
-            _put_mat(out, row, COL_C, new_C)
-            _put_mat(out, row, COL_F, new_F)
+            _put_vec(motion, row, COL_X, new_x)
+            _put_vec(motion, row, COL_V, new_v)
+            _put_mat(motion, row, COL_C, new_C)
+            _put_mat(trial_F, row, 0, new_F)
 
     @ti.kernel
-    def step_backward(packed: ti.types.ndarray(), output: ti.types.ndarray(),
+    def step_backward(packed: ti.types.ndarray(), motion: ti.types.ndarray(),
                       output_grad: ti.types.ndarray(), input_grad: ti.types.ndarray(),
                       grid: Grid, grid_grad: GridGrad, box: ti.types.ndarray(),
                       constants: Constants, serial: ti.template()):  # fmt: skip
@@ -214,8 +219,8 @@ def step_kernels(dtype) -> StepKernels:
         for b, p in ti.ndrange(B, N):
             row = b * N + p
             x_grad, F_grad = g2p_particle_adjoint(
-                _vec(packed, row, COL_X), _mat(packed, row, COL_F), _vec(output, row, COL_V),
-                _mat(output, row, COL_C), grid.velocity, grid_grad.velocity_grad, b, constants,
+                _vec(packed, row, COL_X), _mat(packed, row, COL_F), _vec(motion, row, COL_V),
+                _mat(motion, row, COL_C), grid.velocity, grid_grad.velocity_grad, b, constants,
                 _vec(output_grad, row, COL_X), _vec(output_grad, row, COL_V),
                 _mat(output_grad, row, COL_C), _mat(output_grad, row, COL_F),
             )  # fmt: skip
@@ -304,21 +309,70 @@ def svd3_backward(
         _put_mat(F_grad, p, 0, F_grad_p)
 
 
+#: Columns of a compact signed SVD row: U as a unit quaternion (w, x, y, z), the three signed
+#: singular values, V as a unit quaternion. 11 numbers where the matrices take 21: a Hencky
+#: stress's reverse keeps one such row a particle and step.
+COMPACT_SVD_WIDTH = 11
+
+
 @ti.func
-def _factors(F: ti.template(), factors: ti.template(), p, decompose: ti.template()):
-    """Row p's signed SVD (U, s, V): computed and stored in ``factors`` (U, s, V: 21 columns)
-    when ``decompose``, else read from it."""
-    u, s, v = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3)
-    if ti.static(decompose):
-        u, s, v = jacobi_svd(_mat(F, p, 0))
-        _put_mat(factors, p, 0, u)
-        for i in ti.static(range(3)):
-            factors[p, 9 + i] = s[i]
-        _put_mat(factors, p, 12, v)
+def _quaternion(r):
+    """The unit quaternion (w, x, y, z) of the rotation ``r``, by Shepperd's method: from the
+    largest of 1 + trace and the three 1 + 2 r_ii - trace, so nothing is divided by a small
+    number."""
+    trace = r[0, 0] + r[1, 1] + r[2, 2]
+    q = ti.Vector.zero(float, 4)
+    if trace >= r[0, 0] and trace >= r[1, 1] and trace >= r[2, 2]:
+        w = 0.5 * ti.sqrt(ti.max(1.0 + trace, 0.0))
+        q = ti.Vector([w, (r[2, 1] - r[1, 2]) / (4.0 * w), (r[0, 2] - r[2, 0]) / (4.0 * w),
+                       (r[1, 0] - r[0, 1]) / (4.0 * w)])  # fmt: skip
+    elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
+        x = 0.5 * ti.sqrt(ti.max(1.0 + r[0, 0] - r[1, 1] - r[2, 2], 0.0))
+        q = ti.Vector([(r[2, 1] - r[1, 2]) / (4.0 * x), x, (r[0, 1] + r[1, 0]) / (4.0 * x),
+                       (r[0, 2] + r[2, 0]) / (4.0 * x)])  # fmt: skip
+    elif r[1, 1] >= r[2, 2]:
+        y = 0.5 * ti.sqrt(ti.max(1.0 - r[0, 0] + r[1, 1] - r[2, 2], 0.0))
+        q = ti.Vector([(r[0, 2] - r[2, 0]) / (4.0 * y), (r[0, 1] + r[1, 0]) / (4.0 * y), y,
+                       (r[1, 2] + r[2, 1]) / (4.0 * y)])  # fmt: skip
     else:
-        u, v = _mat(factors, p, 0), _mat(factors, p, 12)
-        s = ti.Vector([factors[p, 9], factors[p, 10], factors[p, 11]], dt=float)
-    return u, s, v
+        z = 0.5 * ti.sqrt(ti.max(1.0 - r[0, 0] - r[1, 1] + r[2, 2], 0.0))
+        q = ti.Vector([(r[1, 0] - r[0, 1]) / (4.0 * z), (r[0, 2] + r[2, 0]) / (4.0 * z),
+                       (r[1, 2] + r[2, 1]) / (4.0 * z), z])  # fmt: skip
+    return q / q.norm()
+
+
+@ti.func
+def _rotation(q):
+    """The rotation matrix of the unit quaternion ``q`` (w, x, y, z)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ti.Matrix([
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+    ], dt=float)  # fmt: skip
+
+
+@ti.func
+def _put_compact(compact: ti.template(), p, u, s, v):
+    """Row p of ``compact`` (:data:`COMPACT_SVD_WIDTH` columns) from the signed SVD (U, s, V):
+    returns (U, s, V) as the row gives them back (the rotations rebuilt from its quaternions),
+    so that whoever reads the row later computes with the same numbers."""
+    qu, qv = _quaternion(u), _quaternion(v)
+    for i in ti.static(range(4)):
+        compact[p, i] = qu[i]
+        compact[p, 7 + i] = qv[i]
+    for i in ti.static(range(3)):
+        compact[p, 4 + i] = s[i]
+    return _rotation(qu), s, _rotation(qv)
+
+
+@ti.func
+def _compact_factors(compact: ti.template(), p):
+    """(U, s, V) of row p of ``compact``, as :func:`_put_compact` returned them."""
+    qu = ti.Vector([compact[p, i] for i in ti.static(range(4))], dt=float)
+    qv = ti.Vector([compact[p, 7 + i] for i in ti.static(range(4))], dt=float)
+    s = ti.Vector([compact[p, 4 + i] for i in ti.static(range(3))], dt=float)
+    return _rotation(qu), s, _rotation(qv)
 
 
 @ti.func
@@ -339,31 +393,61 @@ def _hencky_terms(s, mu, lam):
     return clamped, eps, t, safe, t / safe
 
 
+@ti.func
+def _hencky_tau(f, u, s, v, mu, lam):
+    """The StVK-Hencky Kirchhoff stress ``tau = U diag(g) V^T F^T`` of F = ``f`` from its
+    signed SVD."""
+    _clamped, _eps, _t, _safe, g = _hencky_terms(s, mu, lam)
+    return u @ _diag(g) @ v.transpose() @ f.transpose()
+
+
 @ti.kernel
 def hencky_forward(
     F: ti.types.ndarray(),
     factors: ti.types.ndarray(),
+    compact: ti.types.ndarray(),
     stress: ti.types.ndarray(),
     mu: float,
     lam: float,
     decompose: ti.template(),
     serial: ti.template(),
 ):
-    """StVK-Hencky Kirchhoff stress ``tau = U diag(g) V^T F^T`` of (B, 9) rows F, as
-    ``bridges.laws.StVKHencky`` computes it; the SVD (U, s, V) in the (B, 21) ``factors``
-    (computed when ``decompose``, else given)."""
+    """StVK-Hencky Kirchhoff stress of (B, 9) rows F, as ``bridges.laws.StVKHencky`` computes
+    it, and the rows' signed SVD in the (B, 11) ``compact`` (:data:`COMPACT_SVD_WIDTH`), which
+    is all the reverse needs besides F. The SVD is computed by Jacobi sweeps when
+    ``decompose`` (``factors`` is then not read), else read from the (B, 21) ``factors`` (U, s,
+    V); the stress is computed from the factors as ``compact`` gives them back, the numbers
+    :func:`hencky_stress_again` and :func:`hencky_backward` read."""
     ti.loop_config(serialize=serial)
     for p in range(F.shape[0]):
-        u, s, v = _factors(F, factors, p, decompose)
-        _clamped, _eps, _t, _safe, g = _hencky_terms(s, mu, lam)
-        piola = u @ _diag(g) @ v.transpose()
-        _put_mat(stress, p, 0, piola @ _mat(F, p, 0).transpose())
+        f = _mat(F, p, 0)
+        u, s, v = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3)
+        if ti.static(decompose):
+            u, s, v = jacobi_svd(f)
+        else:
+            u, v = _mat(factors, p, 0), _mat(factors, p, 12)
+            s = ti.Vector([factors[p, 9], factors[p, 10], factors[p, 11]], dt=float)
+        u, s, v = _put_compact(compact, p, u, s, v)
+        _put_mat(stress, p, 0, _hencky_tau(f, u, s, v, mu, lam))
+
+
+@ti.kernel
+def hencky_stress_again(F: ti.types.ndarray(), compact: ti.types.ndarray(),
+                        stress: ti.types.ndarray(), mu: float, lam: float,
+                        serial: ti.template()):  # fmt: skip
+    """The stress :func:`hencky_forward` wrote, from the (B, 9) rows F and their (B, 11)
+    ``compact`` SVD rows (no SVD computed): a step's reverse, which needs the stress, computes
+    it again instead of keeping it."""
+    ti.loop_config(serialize=serial)
+    for p in range(F.shape[0]):
+        u, s, v = _compact_factors(compact, p)
+        _put_mat(stress, p, 0, _hencky_tau(_mat(F, p, 0), u, s, v, mu, lam))
 
 
 @ti.kernel
 def hencky_backward(
     F: ti.types.ndarray(),
-    factors: ti.types.ndarray(),
+    compact: ti.types.ndarray(),
     stress_grad: ti.types.ndarray(),
     F_grad: ti.types.ndarray(),
     lame_grad: ti.types.ndarray(),
@@ -373,13 +457,14 @@ def hencky_backward(
     serial: ti.template(),
 ):
     """Reverse of :func:`hencky_forward`: (B, 9) dL/dF and each row's (dL/dmu, dL/dlam) in
-    (B, 2) ``lame_grad``, from the (B, 9) dL/d tau. The chain rule of the torch law step by
-    step: tau = M F^T, M = U diag(g) Vh, g = t / safe, t = 2 mu eps + lam tr(eps), eps =
-    log(max(|s|, SIGMA_FLOOR)), and the SVD by :func:`_svd_adjoint`."""
+    (B, 2) ``lame_grad``, from the (B, 9) dL/d tau and the (B, 11) ``compact`` SVD rows. The
+    chain rule of the torch law step by step: tau = M F^T, M = U diag(g) Vh, g = t / safe, t =
+    2 mu eps + lam tr(eps), eps = log(max(|s|, SIGMA_FLOOR)), and the SVD by
+    :func:`_svd_adjoint`."""
     ti.loop_config(serialize=serial)
     for p in range(F.shape[0]):
         f = _mat(F, p, 0)
-        u, s, v = _factors(F, factors, p, False)
+        u, s, v = _compact_factors(compact, p)
         clamped, eps, t, safe, g = _hencky_terms(s, mu, lam)
         vh = v.transpose()
         piola = u @ _diag(g) @ vh

@@ -88,6 +88,37 @@ def bmm3(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor | None:
     return _Product3.apply(A, B)
 
 
+class _ScaledProduct(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, A: torch.Tensor, d: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(A, d, B)
+        return torch.bmm(A * d.unsqueeze(-2), B)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, C_grad: torch.Tensor):
+        A, d, B = ctx.saved_tensors
+        wants_a, wants_d, wants_b = ctx.needs_input_grad
+        A_grad = d_grad = B_grad = None
+        if wants_a or wants_d:
+            grad_times_bt = torch.bmm(C_grad, B.mT)  # dL/d(A diag(d))
+            if wants_a:
+                A_grad = grad_times_bt * d.unsqueeze(-2)
+            if wants_d:
+                d_grad = (A * grad_times_bt).sum(-2)
+        if wants_b:
+            B_grad = torch.bmm((A * d.unsqueeze(-2)).mT, C_grad)
+        return A_grad, d_grad, B_grad
+
+
+def scaled_product(A: torch.Tensor, d: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+    """``A @ diag_embed(d) @ B`` of (N, n, n) ``A``, ``B`` and (N, n) ``d`` (a law's way back
+    from singular values: ``U @ diag(s) @ Vh``), keeping only its inputs for the reverse: in a
+    law they are an SVD's factors and the new singular values, which the graph keeps anyway,
+    where autograd's product of ``A * d`` with ``B`` would also keep the scaled A."""
+    return _ScaledProduct.apply(A, d, B)
+
+
 def compile_kernels(dtype: torch.dtype) -> None:
     """Launch the product kernels once in each orientation a captured law's products take
     (``A @ B``, ``A @ B^T``, ``A^T @ B``), forward and backward, if :func:`worthwhile` sends

@@ -717,12 +717,14 @@ class _LawFunction(torch.autograd.Function):
         flat = flat_parameters(parameters, rows)
         ctx.law, ctx.shape, ctx.count = law, shape, count
         out = law.forward(rows, flat)
+        result, saved = out[:, : law.outputs], out[:, law.outputs :]
+        if law.saved:  # tensors of their own: a contiguous result is read without a copy
+            result, saved = result.contiguous(), saved.contiguous()  # (the Hencky stress's)
         # the input tensors, not their rows: F is a view of the step's output or the step's own
         # input, and an SVD's factors are what its reverse keeps, which the graph keeps anyway,
         # while the rows are a copy (the reverse copies again)
-        ctx.save_for_backward(*[p.detach() for p in pieces], flat, out[:, law.outputs :],
-                              *parameters)  # fmt: skip
-        return out[:, : law.outputs].reshape(shape)
+        ctx.save_for_backward(*[p.detach() for p in pieces], flat, saved, *parameters)
+        return result.reshape(shape)
 
     @staticmethod
     def backward(ctx, grad):

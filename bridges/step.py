@@ -21,7 +21,8 @@ particle tensors torch saves (33 numbers per particle and step) plus the laws' o
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 import taichi as ti
 import torch
@@ -96,18 +97,21 @@ class Transfer:
             return not self._parallel
         return not runtime.parallel_worthwhile(self.num_particles, PARALLEL_MIN_PARTICLES)
 
-    def forward(self, packed: torch.Tensor) -> torch.Tensor:
-        """Packed (B * N, 24) next state (x, v, C, F_trial) from a packed (B * N, 33) input."""
-        out = packed.new_empty(packed.shape[0], kernels.STATE_WIDTH)
-        self._kernels.forward(packed, out, self.grid, self._box, self._constants, self._serial)
-        return out
+    def forward(self, packed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The next state from a packed (B * N, 33) input: its (B * N, 15) motion (x, v, C)
+        and its (B * N, 9) F_trial."""
+        motion = packed.new_empty(packed.shape[0], kernels.MOTION_WIDTH)
+        trial_F = packed.new_empty(packed.shape[0], 9)
+        self._kernels.forward(packed, motion, trial_F, self.grid, self._box, self._constants,
+                              self._serial)  # fmt: skip
+        return motion, trial_F
 
-    def backward(self, packed: torch.Tensor, output: torch.Tensor,
+    def backward(self, packed: torch.Tensor, motion: torch.Tensor,
                  output_grad: torch.Tensor) -> torch.Tensor:  # fmt: skip
-        """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 33) input, its
-        (B * N, 24) output and dL/d(output)."""
+        """Packed (B * N, 33) dL/d(input) of one step from its packed (B * N, 33) input, the
+        (B * N, 15) motion it output and the packed (B * N, 24) dL/d(x, v, C, F_trial)."""
         input_grad = packed.new_empty(packed.shape)
-        self._kernels.backward(packed, output, output_grad.contiguous(), input_grad, self.grid,
+        self._kernels.backward(packed, motion, output_grad.contiguous(), input_grad, self.grid,
                                self._grid_grad, self._box, self._constants,
                                self._serial)  # fmt: skip
         return input_grad
@@ -135,21 +139,55 @@ def _unpack(packed: torch.Tensor, shapes: Iterable[tuple[int, ...]]) -> tuple[to
     return tuple(views)
 
 
+@dataclass(frozen=True)
+class StressRecipe:
+    """How a stress can be computed again from tensors the graph keeps anyway:
+    ``compute(*tensors)`` gives it, (N, 3, 3), without a graph. A law whose reverse keeps such
+    tensors attaches one to the stress it returns (:func:`attach_recipe`); a step then keeps
+    them, not the stress, and computes the stress again in its reverse (which needs it to
+    redo the step's grid)."""
+
+    tensors: tuple[torch.Tensor, ...]
+    compute: Callable[..., torch.Tensor]
+
+
+_RECIPE_ATTRIBUTE = "_sga_stress_recipe"
+
+
+def attach_recipe(stress: torch.Tensor, recipe: StressRecipe) -> torch.Tensor:
+    """``stress``, carrying ``recipe`` (see :class:`StressRecipe`)."""
+    setattr(stress, _RECIPE_ATTRIBUTE, recipe)
+    return stress
+
+
+def recipe_of(stress: torch.Tensor) -> StressRecipe | None:
+    """The :class:`StressRecipe` ``stress`` carries, if any."""
+    return getattr(stress, _RECIPE_ATTRIBUTE, None)
+
+
 class _MPMStep(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x, v, C, F, stress, transfer: Transfer):
         ctx.transfer = transfer
         # the inputs, not their packed copy: x, v and C are views of the previous step's
-        # output, which the graph keeps anyway, so only F and stress cost memory
-        ctx.save_for_backward(x, v, C, F, stress)
-        # the packed output: the next step's inputs are views of it, so it costs no memory
-        # (a plain tensor without a graph: holding it makes no reference cycle)
-        ctx.output = transfer.forward(_packed(transfer, x, v, C, F, stress))
-        return _unpack(ctx.output, CARRIED.values())
+        # output, which the graph keeps anyway, so only F and stress cost memory; a stress
+        # that can be computed again from what its law keeps is not kept
+        recipe = recipe_of(stress)
+        ctx.recompute = None if recipe is None else recipe.compute
+        ctx.save_for_backward(x, v, C, F, *((stress,) if recipe is None else recipe.tensors))
+        # the output's motion: the next step's x, v and C are views of it, so it costs no
+        # memory (a plain tensor without a graph: holding it makes no reference cycle); the
+        # trial F is a tensor of its own, freed once the plastic law has read it (unless the
+        # law keeps it)
+        ctx.motion, trial_F = transfer.forward(_packed(transfer, x, v, C, F, stress))
+        motion = _unpack(ctx.motion, [CARRIED[name] for name in kernels.MOTION_FIELDS])
+        return (*motion, trial_F.unflatten(1, CARRIED["F"]))
 
     @staticmethod
     def backward(ctx, *output_grads):
-        packed = _packed(ctx.transfer, *ctx.saved_tensors)
+        x, v, C, F, *kept = ctx.saved_tensors
+        stress = kept[0] if ctx.recompute is None else ctx.recompute(*kept)
+        packed = _packed(ctx.transfer, x, v, C, F, stress)
         N = packed.shape[0]
         widths = [math.prod(shape) for shape in CARRIED.values()]
         output_grad = torch.cat(
@@ -159,7 +197,7 @@ class _MPMStep(torch.autograd.Function):
             ],
             dim=1,
         )
-        input_grad = ctx.transfer.backward(packed, ctx.output, output_grad)
+        input_grad = ctx.transfer.backward(packed, ctx.motion, output_grad)
         return (*_unpack(input_grad, kernels.INPUT_FIELDS.values()), None)
 
 

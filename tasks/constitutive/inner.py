@@ -54,7 +54,7 @@ class InnerSettings:
     clip_norm: float = 1.0
     reset_every: int = 100
     optimizer: str = "adam"
-    graph_memory_mb: float = 250.0
+    graph_memory_mb: float = 120.0
     batch_particles: int = 5_000
 
     def __post_init__(self) -> None:

@@ -237,6 +237,8 @@ def _keep_lu_where_used(graph: fx.Graph) -> None:
 #: Operations that only re-view a tensor (as ``matmul`` wraps the factors of a product).
 _VIEWS = (torch.ops.aten.view.default, torch.ops.aten.expand.default,
           torch.ops.aten._unsafe_view.default, torch.ops.aten.reshape.default)  # fmt: skip
+_VIEW_NAMES = {view: view.__name__.split(".")[0] for view in _VIEWS}
+_VIEW_BY_NAME = {name: view for view, name in _VIEW_NAMES.items()}
 
 
 def _diagonal_products_as_scaling(graph: fx.Graph) -> None:
@@ -253,6 +255,27 @@ def _diagonal_products_as_scaling(graph: fx.Graph) -> None:
             node.target, node.args = times_diagonal, (left, right, values, True)
         elif (values := _diagonal_of(left)) is not None:
             node.target, node.args = times_diagonal, (right, left, values, False)
+    _scaled_factors_into_products(graph)
+
+
+def _scaled_factors_into_products(graph: fx.Graph) -> None:
+    """A product whose left factor is a column scaling (``(U @ diag_embed(s)) @ Vh``, seen
+    through views) computes both at once (:func:`product_of_scaled`): autograd then keeps the
+    factors and ``s``, which the operations that made them keep anyway, not the scaled
+    factor, a tensor of its own."""
+    for node in list(graph.nodes):
+        if node.target is not batched_product:
+            continue
+        left, right = node.args
+        views = []
+        while isinstance(left, fx.Node) and left.target in _VIEWS:
+            views.append((_VIEW_NAMES[left.target], left.args[1]))
+            left = left.args[0]
+        if isinstance(left, fx.Node) and left.target is times_diagonal and left.args[3]:
+            other, diagonal, values, _ = left.args
+            node.target = product_of_scaled
+            node.args = (other, diagonal, values, right, list(reversed(views)))
+    graph.eliminate_dead_code()
 
 
 def _diagonal_of(node: Any) -> fx.Node | None:
@@ -284,6 +307,25 @@ def times_diagonal(
     if diagonal_right:
         return batched_product(other, diagonal)
     return batched_product(diagonal, other)
+
+
+def product_of_scaled(
+    other: torch.Tensor, diagonal: torch.Tensor, values: torch.Tensor, right: torch.Tensor,
+    views: list[tuple[str, list[int]]],
+) -> torch.Tensor:
+    """``bmm(V(times_diagonal(other, diagonal, values, True)), right)``, V the view operations
+    ``views`` (names and shapes, in order): one :func:`bridges.products.scaled_product` where
+    the shapes at run time show that the scaling is one and the views re-view nothing; else
+    those operations one by one."""
+    shape = tuple(other.shape)
+    if (values.dim() == 2 and len(shape) == 3 and shape[1] == shape[2] == values.shape[1]
+            and tuple(diagonal.shape) == shape == tuple(right.shape)
+            and all(tuple(size) == shape for _name, size in views)):  # fmt: skip
+        return products.scaled_product(other, values, right)
+    left = times_diagonal(other, diagonal, values, True)
+    for name, size in views:
+        left = _VIEW_BY_NAME[name](left, size)
+    return batched_product(left, right)
 
 
 def _target(op: str) -> Any:

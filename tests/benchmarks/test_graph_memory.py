@@ -1,6 +1,7 @@
 """The graph walk of ``benchmarks/graph_memory.py`` counts what a fitted step keeps: the step's
-own 33 or 42 numbers a particle, the known Hencky stress's SVD factors, and for the elastic task's
-compiled law nothing more."""
+own 33 or 35 numbers a particle (the known Hencky stress's compact SVD among them, not the
+stress), for the elastic task's compiled law nothing more, for the plastic one its input and
+its SVD's values."""
 
 from __future__ import annotations
 
@@ -18,15 +19,21 @@ def numbers(measured, node: str) -> float:
 
 def test_a_step_keeps_its_state_and_the_laws_what_they_need(tmp_path):
     elastic = graph_memory.measure("elastic", 2, {"steps": "200"}, tmp_path)
-    plastic = graph_memory.measure("plasticine", 2, {"steps": "200"}, tmp_path)
-    # the step: input state (x, v, C, F_trial: 24) and F; the stress is the elastic law's
-    # compiled output (9 more) or, for plasticine, F_corrected and the stress (18 more)
+    # the plastic law in torch (float64, this session's precision, leaves it there anyway)
+    plastic = graph_memory.measure("plasticine", 2, {"steps": "200", "law_kernels": "none"},
+                                   tmp_path)  # fmt: skip
+    # the step: its input motion (x, v, C: 15) and F (9); the elastic law's compiled stress (9)
     assert numbers(elastic, "_MPMStepBackward") == 33
     # the compiled law keeps its input (the step's F) and its parameters (a few numbers)
     assert elastic.total / elastic.number_bytes == pytest.approx(33, abs=0.1)
-    assert numbers(plastic, "_MPMStepBackward") == 42
-    assert numbers(plastic, "_HenckyStressBackward") == 21  # U, s, V of F_corrected
-    assert plastic.total > elastic.total and plastic.particles == 2000
+    # plasticine: the motion, F_corrected and, for the Hencky stress computed again in the
+    # step's reverse, F_corrected's SVD as quaternions and singular values (11), not the stress
+    assert numbers(plastic, "_MPMStepBackward") == 35
+    assert numbers(plastic, "_HenckyStressBackward") == 0  # F_corrected and its SVD: counted
+    # the law's SVD and its U diag(s) Vh: the SVD's factors (21) and s (3), not the scaled U
+    assert numbers(plastic, "_SVDBackward") + numbers(plastic, "_ScaledProductBackward") == 24
+    assert plastic.total / plastic.number_bytes == pytest.approx(71, abs=0.1)  # and 12 others
+    assert plastic.particles == 2000
     assert elastic.segments_at_once <= 5 and plastic.segments_at_once <= 5  # batch_particles
 
 

@@ -135,3 +135,31 @@ def test_packed_rows_follow_the_carried_state():
     widths = (kernels.STATE_WIDTH, kernels.PACKED_WIDTH)
     assert columns == list(starts[:-1])
     assert widths == (starts[len(CARRIED)], starts[-1])
+
+
+def test_a_step_computes_a_hencky_stress_again_instead_of_keeping_it():
+    """A stress that carries a recipe (the Taichi Hencky stress) is not kept by the step: its
+    reverse computes it again from F and the compact SVD, which the stress's own node keeps.
+    Outputs and gradients (of x, v, C, the trial F and the Lame parameters) equal those of the
+    same step given the stress without its recipe."""
+    from bridges.hencky import hencky_stress
+    from bridges.step import recipe_of
+
+    scene = impact_scene(steps=1, walls=WALLS["slip"])
+    inputs, weights = _random_step(scene, seed=11)
+    results = []
+    for keep_stress in (False, True):
+        x, v, C, F = (t.clone().requires_grad_(True) for t in inputs[:4])
+        mu, lam = (torch.tensor(value, dtype=torch.float64, requires_grad=True)
+                   for value in (3e4, 2e4))  # fmt: skip
+        stress = hencky_stress(F, mu, lam)
+        assert recipe_of(stress) is not None
+        if keep_stress:
+            stress = stress.clone()  # no recipe: the step keeps it
+        outputs = mpm_step(x, v, C, F, stress, Transfer(scene))
+        kept = {t.untyped_storage().data_ptr() for t in outputs[0].grad_fn.saved_tensors}
+        assert (stress.untyped_storage().data_ptr() in kept) == keep_stress
+        sum((w * o).sum() for w, o in zip(weights, outputs, strict=True)).backward()
+        results.append([*(o.detach() for o in outputs), *(t.grad for t in (x, v, C, F, mu, lam))])
+    for got, expected in zip(*results, strict=True):
+        torch.testing.assert_close(got, expected, rtol=1e-12, atol=1e-12 * expected.abs().max())

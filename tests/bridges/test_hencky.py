@@ -8,6 +8,7 @@ they also take the SVD themselves, by the same Jacobi sweeps as ``bridges.fast_s
 """
 
 import json
+import math
 import subprocess
 import sys
 
@@ -87,6 +88,7 @@ def test_no_kernels_for_another_precision():
 
 FLOAT32 = """
 import json
+import math
 import torch
 import taichi_mpm as tm
 from bridges.hencky import hencky_stress
@@ -125,3 +127,30 @@ def test_float32_kernels_take_their_own_svd_and_are_as_accurate_as_torch():
     errors = json.loads(out.stdout.strip().splitlines()[-1])  # (kernels, torch) vs float64
     for name, (kernels, torch_law) in errors.items():
         assert kernels < 2.0 * torch_law + 1e-6, (name, errors)
+
+
+def _about_axis(axis: int, angle: float) -> torch.Tensor:
+    c, s = math.cos(angle), math.sin(angle)
+    i, j = [k for k in range(3) if k != axis]
+    rotation = torch.eye(3, dtype=torch.float64)
+    rotation[i, i], rotation[i, j], rotation[j, i], rotation[j, j] = c, -s, s, c
+    return rotation
+
+
+def test_the_compact_svd_keeps_rotations_of_every_kind():
+    """The reverse keeps the SVD's rotations as quaternions: rotations whose quaternion comes
+    from each of Shepperd's four cases (small angles; half turns about x, y and z, where the
+    trace is -1) give the torch law's stress and gradients."""
+    stretch = torch.diag(torch.tensor([1.3, 0.8, 1.05], dtype=torch.float64))
+    rotations = [_about_axis(0, 0.2), *(_about_axis(axis, math.pi - 1e-3) for axis in range(3)),
+                 *(_about_axis(axis, math.pi) for axis in range(3))]  # fmt: skip
+    F = torch.stack([r @ stretch @ _about_axis(2, 0.7).T for r in rotations]
+                    + [_about_axis(1, 0.4) @ stretch @ r.T for r in rotations])  # fmt: skip
+    E = torch.tensor(3e5, dtype=torch.float64)
+    nu = torch.tensor(0.3, dtype=torch.float64)
+    weights = torch.randn(F.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(4))
+    fused = _stress_and_gradients(hencky_stress, F, E, nu, weights)
+    reference = _stress_and_gradients(hencky_stress_in_torch, F, E, nu, weights)
+    for name, got, expected in zip(["stress", "F", "E", "nu"], fused, reference, strict=True):
+        torch.testing.assert_close(got, expected, rtol=1e-10, atol=1e-11 * expected.abs().max(),
+                                   msg=name)  # fmt: skip

@@ -7,7 +7,7 @@ import sys
 import pytest
 import torch
 
-from bridges.products import MIN_BATCH, bmm3, worthwhile
+from bridges.products import MIN_BATCH, bmm3, scaled_product, worthwhile
 from taichi_mpm import runtime
 
 
@@ -38,6 +38,24 @@ def test_products_match_finite_differences():
     A, B, _ = _batches(6, seed=5)
     inputs = (A.requires_grad_(True), B.requires_grad_(True))
     assert torch.autograd.gradcheck(bmm3, inputs)
+
+
+def test_a_scaled_product_equals_the_products_and_matches_finite_differences():
+    """``A diag(d) B`` in one operation: the values and gradients of ``A @ diag_embed(d) @ B``,
+    finite differences, and only the inputs kept for the reverse."""
+    A, B, weights = _batches(50, seed=7)
+    d = torch.rand(50, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(8)) + 0.1
+    results = []
+    for product in (scaled_product, lambda a, s, b: a @ torch.diag_embed(s) @ b):
+        inputs = [t.clone().requires_grad_() for t in (A, d, B)]
+        (weights * product(*inputs)).sum().backward()
+        results.append([product(*inputs).detach(), *(t.grad for t in inputs)])
+    for got, expected in zip(*results, strict=True):
+        torch.testing.assert_close(got, expected, rtol=1e-12, atol=1e-12)
+    inputs = tuple(t[:5].clone().requires_grad_() for t in (A, d, B))
+    assert torch.autograd.gradcheck(scaled_product, inputs)
+    node = scaled_product(*inputs).grad_fn
+    assert {t.data_ptr() for t in node.saved_tensors} == {t.data_ptr() for t in inputs}
 
 
 def test_other_shapes_dtypes_and_precisions_are_left_to_torch():
