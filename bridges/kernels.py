@@ -2,7 +2,8 @@
 
 A Taichi launch costs ~25 us per torch-tensor argument on this CPU, more than the copy itself,
 so each step's particle data crosses in one packed (B * N, 33) torch tensor (``COL_*``: x, v,
-C, F, stress in row-major order) and comes back in one (B * N, 24) tensor (x, v, C, F). Torch
+C, F, stress in row-major order) and comes back in two: the (B * N, 15) motion (x, v, C) and
+the (B * N, 9) trial F, which the graph need not keep once the plastic law has read it. Torch
 tensors are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU), and the
 kernels read and write them directly: only the grids live in Taichi arrays.
 
