@@ -164,7 +164,7 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     observed = ground_truth(spec, options.steps)
-    compile_law(law, observed, options)
+    compile_law(law, observed, options, settings.fidelity)
     observed = fidelity.first_segments(observed, spec.reset_every, settings.fidelity)
     rollout = task_rollout(spec, law, tm.paper_scene(steps=observed.positions.shape[0] - 1))
     inner = InnerSettings(
@@ -194,15 +194,27 @@ def evaluate(spec: ConstitutiveSpec, data: Any, settings: EvaluationSettings) ->
     return evaluation
 
 
-def compile_law(law: GraphLaw, observed: Trajectory, options: ConstitutiveOptions) -> None:
+def compile_law(law: GraphLaw, observed: Trajectory, options: ConstitutiveOptions,
+                fidelity: float = 1.0) -> None:  # fmt: skip
     """Give ``law`` (built in the running Taichi's precision) its Taichi kernels where
-    ``options.law_kernels`` asks for them and the translation agrees with torch on the
-    observation's deformation gradients."""
-    if options.law_kernels == "none":
+    ``options.law_kernels`` asks for them (for a fit at ``fidelity``: see
+    :func:`law_kernels_for`) and the translation agrees with torch on the observation's
+    deformation gradients."""
+    kernels = law_kernels_for(options.law_kernels, fidelity)
+    if kernels == "none":
         return
     F = observed_deformations(observed, torch_dtype())
-    svd, factored = options.law_kernels == "all", options.law_kernels == "svd-inputs"
+    svd, factored = kernels == "all", kernels == "svd-inputs"
     law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))
+
+
+def law_kernels_for(option: str, fidelity: float) -> str:
+    """The ``law_kernels`` mode of a fit at ``fidelity``: ``auto`` is ``all`` for a full fit
+    and ``no-svd`` for a screen (below 1), a fit too short to repay the compiling of an SVD's
+    sweeps (about 0.75 s against its one epoch on two segments); any other option as it is."""
+    if option != "auto":
+        return option
+    return "all" if fidelity >= 1.0 else "no-svd"
 
 
 def task_rollout(spec: ConstitutiveSpec, law: torch.nn.Module, scene: tm.Scene) -> Rollout:

@@ -25,10 +25,12 @@ class ConstitutiveOptions:
     peak 139 MB lower (``benchmarks/evaluate_speed.py``, docs/benchmarks.md).
     ``law_kernels``: which captured laws run compiled into Taichi kernels, one launch forward
     and one in reverse a step, where the translation covers their operations and agrees with
-    torch (:mod:`tasks.constitutive.law_kernel`): ``all`` (default) every law the translation
-    covers, its SVDs written out in the kernels as Jacobi sweeps (a von Mises law's step took
-    4.6 ms against torch's 6.4 ms, and its graph keeps less, for 0.75 s of compiling on a quiet
-    machine: ``benchmarks/svd_law_kernels.py``); ``no-svd`` those without an SVD;
+    torch (:mod:`tasks.constitutive.law_kernel`): ``auto`` (default) is ``all`` for a full fit
+    and ``no-svd`` for a screen (a fit too short to repay compiling the sweeps); ``all`` every
+    law the translation covers, its SVDs written out in the kernels as Jacobi sweeps (a von
+    Mises law's step took 4.6 ms against torch's 6.4 ms, and its graph keeps less, for 0.75 s
+    of compiling on a quiet machine: ``benchmarks/svd_law_kernels.py``); ``no-svd`` those
+    without an SVD;
     ``svd-inputs`` also those whose SVDs are of F itself (the genetic-programming laws, the
     example plastic laws), computed once a step by the batched svd3 kernel and read by the
     law's kernels as inputs (compiled in about 0.15 s, a step about as fast as torch's);
@@ -39,7 +41,7 @@ class ConstitutiveOptions:
     precision: Literal["float32", "float64"] | None = None
     graph_memory_mb: float = 120.0
     batch_particles: int = 5_000
-    law_kernels: Literal["no-svd", "svd-inputs", "all", "none"] = "all"
+    law_kernels: Literal["auto", "all", "no-svd", "svd-inputs", "none"] = "auto"
 
     def __post_init__(self) -> None:
         if self.steps is not None and self.steps < 1:

@@ -20,6 +20,7 @@ from bridges import scalar_law
 from sga_agent.registry import load_task
 from sga_agent.task import EvaluationSettings
 from tasks.constitutive import law_kernel, law_ops
+from tasks.constitutive.evaluation import law_kernels_for
 from tasks.constitutive.gp.codegen import law_code
 from tasks.constitutive.gp.genome import Genome, Node, Param, Term
 from tasks.constitutive.law_capture import capture_law
@@ -268,3 +269,33 @@ def test_a_fit_scores_a_law_the_same_with_and_without_kernels(task_name, code, k
     assert compiled.loss == pytest.approx(in_torch.loss, rel=1e-9)
     for name, values in in_torch.curves.items():
         assert compiled.curves[name] == pytest.approx(values, rel=1e-9), name
+
+
+@pytest.mark.parametrize(("option", "fidelity", "mode"), [
+    ("auto", 1.0, "all"), ("auto", 0.2, "no-svd"), ("all", 0.2, "all"),
+    ("svd-inputs", 1.0, "svd-inputs"), ("none", 1.0, "none"),
+])  # fmt: skip
+def test_the_default_compiles_an_svd_only_for_a_full_fit(option, fidelity, mode):
+    """``auto`` writes a law's SVDs into its kernels for a full fit, not for a screen (too short
+    to repay the compiling); any other option is taken as it is."""
+    assert law_kernels_for(option, fidelity) == mode
+
+
+def test_a_screen_asks_for_no_svd_kernels(monkeypatch, tmp_path):
+    """An evaluation passes its fidelity to the law's compile: the kernels asked for are the
+    sweeps for a full fit and none of an SVD for a screen."""
+    asked = []
+    real = law_kernel.kernel_law
+
+    def recording(law, F, svd=True, factored=False):
+        asked.append(svd)
+        return real(law, F, svd=svd, factored=factored)
+
+    monkeypatch.setattr(law_kernel, "kernel_law", recording)
+    task = load_task("plasticine")
+    data = task.capture((EXAMPLES / "von_mises.py").read_text())
+    for fidelity in (1.0, 0.2):
+        settings = EvaluationSettings(epochs=1, fidelity=fidelity,
+                                      options=ConstitutiveOptions(steps=200))  # fmt: skip
+        assert task.evaluate(data, settings).valid
+    assert asked == [True, False]
