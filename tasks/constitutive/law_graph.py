@@ -267,22 +267,28 @@ def _scaled_factors_into_products(graph: fx.Graph) -> None:
         if node.target is not batched_product:
             continue
         left, right = node.args
-        views = []
-        while isinstance(left, fx.Node) and left.target in _VIEWS:
-            views.append((_VIEW_NAMES[left.target], left.args[1]))
-            left = left.args[0]
+        left, views = _beneath_views(left)
         if isinstance(left, fx.Node) and left.target is times_diagonal and left.args[3]:
             other, diagonal, values, _ = left.args
             node.target = product_of_scaled
-            node.args = (other, diagonal, values, right, list(reversed(views)))
+            node.args = (other, diagonal, values, right, views)
     graph.eliminate_dead_code()
+
+
+def _beneath_views(node: Any) -> tuple[Any, list[tuple[str, Any]]]:
+    """The node that ``node`` re-views (itself if it is no view), and the view operations
+    from it to ``node``, in the order they run: (name, shape) pairs."""
+    views = []
+    while isinstance(node, fx.Node) and node.target in _VIEWS:
+        views.append((_VIEW_NAMES[node.target], node.args[1]))
+        node = node.args[0]
+    return node, views[::-1]
 
 
 def _diagonal_of(node: Any) -> fx.Node | None:
     """The vector ``s`` when ``node`` is ``diag_embed(s)`` (main diagonal, last two dimensions)
     seen through views only; else None."""
-    while isinstance(node, fx.Node) and node.target in _VIEWS:
-        node = node.args[0]
+    node, _views = _beneath_views(node)
     if not isinstance(node, fx.Node) or node.target is not torch.ops.aten.diag_embed.default:
         return None
     arguments = dict(zip(("offset", "dim1", "dim2"), node.args[1:], strict=False)) | node.kwargs
@@ -300,13 +306,21 @@ def times_diagonal(
     from ``values`` by ``diag_embed`` and views: ``other`` scaled by ``values``, column by
     column (row by row), when ``diagonal`` has the shape of ``diag_embed(values)`` (the views
     then changed nothing) and ``other`` that of the product; else the product itself."""
-    if values.dim() == 2:
-        batch, size = values.shape
-        if diagonal.shape == (batch, size, size) == other.shape:
-            return other * values.unsqueeze(-2 if diagonal_right else -1)
+    if _is_scaling(other, diagonal, values):
+        return other * values.unsqueeze(-2 if diagonal_right else -1)
     if diagonal_right:
         return batched_product(other, diagonal)
     return batched_product(diagonal, other)
+
+
+def _is_scaling(other: torch.Tensor, diagonal: torch.Tensor, values: torch.Tensor) -> bool:
+    """Whether ``diagonal`` (``diag_embed(values)`` seen through views) has the shape
+    ``diag_embed`` gave it, one (n, n) matrix per row of the (N, n) ``values``, as ``other``
+    has: the views changed nothing, and the product with it scales ``other``."""
+    if values.dim() != 2:
+        return False
+    batch, size = values.shape
+    return tuple(diagonal.shape) == (batch, size, size) == tuple(other.shape)
 
 
 def product_of_scaled(
@@ -318,8 +332,7 @@ def product_of_scaled(
     the shapes at run time show that the scaling is one and the views re-view nothing; else
     those operations one by one."""
     shape = tuple(other.shape)
-    if (values.dim() == 2 and len(shape) == 3 and shape[1] == shape[2] == values.shape[1]
-            and tuple(diagonal.shape) == shape == tuple(right.shape)
+    if (_is_scaling(other, diagonal, values) and tuple(right.shape) == shape
             and all(tuple(size) == shape for _name, size in views)):  # fmt: skip
         return products.scaled_product(other, values, right)
     left = times_diagonal(other, diagonal, values, True)
