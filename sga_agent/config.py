@@ -3,9 +3,10 @@
 A run is described by a :class:`SearchConfig`: the task with its typed options, the proposer,
 and one config per component, as OpenEvolve and ShinkaEvolve give each of theirs: the outer
 loop (:class:`LoopConfig`), the inner fit (:class:`FitConfig`), the sandbox
-(:class:`SandboxConfig`), the executor (:class:`ExecutorConfig`) and the budgets
-(:class:`Budgets`). It is written to the run folder (:meth:`SearchConfig.to_dict`), so
-``sga-agent resume`` continues with exactly the same settings.
+(:class:`SandboxConfig`), the executor (:class:`ExecutorConfig`), how the model is asked
+(:class:`ModelConfig`) and the budgets (:class:`Budgets`). It is written to the run folder
+(:meth:`SearchConfig.to_dict`), so ``sga-agent resume`` continues with exactly the same
+settings.
 
 Each setting also has a flat name (:data:`SETTINGS`): the command line's, that of the
 benchmarks' ``--set``, and its key in the ``config.json`` of runs written before the components
@@ -265,6 +266,53 @@ class ExecutorConfig:
 
 
 @dataclass(frozen=True)
+class ModelConfig:
+    """How the model is asked (a litellm proposer's settings; the others ignore them).
+
+    Parameters
+    ----------
+    request_timeout_s : float
+        Seconds one request may take before it counts as failed and is retried.
+    retries : int
+        Further attempts after a timeout, rate limit, server error or empty answer; when they
+        run out the search stops, resumable.
+    prompt_tokens : int, optional
+        The most tokens a prompt may hold (litellm's counter for the model): the earlier
+        solutions' feedback is shortened, the worst first, until it fits. The default keeps a
+        prompt at K = 5 within an 8k-context model with room for the answer; None: no bound.
+    price : (float, float), optional
+        USD per million input and output tokens, for a model litellm cannot price (needed
+        for ``max_usd`` then); None: litellm's price map.
+    """
+
+    request_timeout_s: float = 120.0
+    retries: int = 4
+    prompt_tokens: int | None = 6000
+    price: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.request_timeout_s) and self.request_timeout_s > 0):
+            raise ConfigError(f"request_timeout_s must be positive, got {self.request_timeout_s}")
+        _at_least(self, ("retries",), 0, ">= 0")
+        if self.prompt_tokens is not None and self.prompt_tokens < 500:
+            raise ConfigError(
+                f"prompt_tokens must be at least 500 (the task and format alone need about "
+                f"that), got {self.prompt_tokens}"
+            )
+        price = self.price
+        if price is not None:
+            if isinstance(price, str) or len(price) != 2:
+                raise ConfigError(
+                    f"price must be two numbers, USD per million input and output tokens "
+                    f"(e.g. 2.5,10), got {price!r}"
+                )
+            values = tuple(float(p) for p in price)
+            if not all(math.isfinite(p) and p >= 0 for p in values):
+                raise ConfigError(f"price must be two numbers >= 0, got {price!r}")
+            object.__setattr__(self, "price", values)
+
+
+@dataclass(frozen=True)
 class Budgets:
     """Limits at which a run stops cleanly (None: none): ``max_usd`` spent on the model,
     ``max_tokens`` it used, ``max_evaluations`` run, ``max_seconds`` of wall time (over all
@@ -308,7 +356,7 @@ class Budgets:
 #: The components of a run's config, by their field in :class:`SearchConfig`.
 COMPONENTS: dict[str, type] = {
     "loop": LoopConfig, "fit": FitConfig, "sandbox": SandboxConfig, "executor": ExecutorConfig,
-    "budgets": Budgets,
+    "model": ModelConfig, "budgets": Budgets,
 }  # fmt: skip
 #: Every component setting by its flat name: its component and its field there.
 SETTINGS: dict[str, tuple[str, str]] = {
@@ -357,7 +405,7 @@ class SearchConfig:
         The preset the settings started from (a record: its values are in the components).
     seed : int
         Seed passed to the evaluations and the offline proposers.
-    loop, fit, sandbox, executor, budgets
+    loop, fit, sandbox, executor, model, budgets
         The components' configs.
     """
 
@@ -371,6 +419,7 @@ class SearchConfig:
     fit: FitConfig = field(default_factory=FitConfig)
     sandbox: SandboxConfig = field(default_factory=SandboxConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
     budgets: Budgets = field(default_factory=Budgets)
 
     def __post_init__(self) -> None:

@@ -121,11 +121,14 @@ class IterationStarted(Event):
 
 @dataclass(frozen=True)
 class IterationDone(Event):
-    """An outer iteration ended; ``top`` holds the heap's best entries' summaries."""
+    """An outer iteration ended; ``top`` holds the heap's best entries' summaries, ``tokens``
+    and ``cost_usd`` what its answers cost (None in runs recorded before they were)."""
 
     type: ClassVar[str] = "iteration_done"
     iteration: int
     top: list[dict[str, Any]]
+    tokens: int | None = None
+    cost_usd: float | None = None
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+#: Relative difference below which two losses are one number: the same law, written otherwise.
+SAME_LOSS = 1e-9
 
 
 @dataclass(frozen=True)
@@ -67,9 +71,31 @@ class SolutionHeap:
         """The k best entries, best first (valid ones before invalid ones)."""
         return sorted(self.entries, key=lambda entry: entry.key(self.parsimony))[:k]
 
+    def distinct_top(self, k: int, form: Callable[[str], str]) -> list[Entry]:
+        """The k best valid entries, best first, one per law: an entry whose code has the
+        ``form`` of a better one (the same law with other constants), or whose loss equals a
+        better one's, is passed over. Fewer than k when fewer distinct laws exist."""
+        chosen: list[Entry] = []
+        forms: set[str] = set()
+        for entry in self.top(len(self.entries)):
+            if not (entry.valid and math.isfinite(entry.loss)):
+                continue
+            key = form(entry.code)
+            if key in forms or any(_same_loss(entry.loss, other.loss) for other in chosen):
+                continue
+            forms.add(key)
+            chosen.append(entry)
+            if len(chosen) == k:
+                break
+        return chosen
+
     def best(self) -> Entry | None:
         ranked = self.top(1)
         return ranked[0] if ranked else None
 
     def __len__(self) -> int:
         return len(self.entries)
+
+
+def _same_loss(a: float, b: float) -> bool:
+    return abs(a - b) <= SAME_LOSS * max(abs(a), abs(b))

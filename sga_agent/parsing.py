@@ -6,7 +6,8 @@ through its syntax tree only (nothing is executed) and raises :class:`CodeReject
 message is feedback for the next prompt, when it breaks a generic safety rule:
 
 - imports only from the allowed top-level modules (torch, math and numpy for equation tasks,
-  none for entity tasks), never from :data:`FORBIDDEN_MODULES`;
+  with the harmless standard modules of :data:`HARMLESS_IMPORTS` such as ``typing``; none
+  for entity tasks), never from :data:`FORBIDDEN_MODULES`;
 - no builtins that run code, touch files or inspect the interpreter (:data:`FORBIDDEN_NAMES`),
   and ``getattr``/``setattr``/``delattr``/``hasattr`` only with a literal attribute name;
 - no dunder attributes besides ``__init__``, no private attributes of imported modules, and no
@@ -33,9 +34,15 @@ from dataclasses import dataclass
 from sga_agent.task import Task, as_task
 from sga_agent.task.code import CodeRejected, Problem, dotted_name, import_aliases, parse_python
 
+#: Standard-library modules of no harm that models import out of habit (type hints, small
+#: helpers), allowed beside a kind's own; the capture process has them loaded already.
+HARMLESS_IMPORTS = (
+    "__future__", "abc", "collections", "dataclasses", "enum", "functools", "itertools",
+    "numbers", "typing",
+)  # fmt: skip
 #: Imports allowed by default, per task kind (top-level module names).
 DEFAULT_IMPORTS: dict[str, tuple[str, ...]] = {
-    "equation": ("torch", "math", "numpy"),
+    "equation": ("torch", "math", "numpy", *HARMLESS_IMPORTS),
     "entity": (),
 }
 #: Modules that reach files, processes, the network or the interpreter's machinery. Never
@@ -84,10 +91,17 @@ class ParsedResponse:
         keys "analysis", "plan" and "code", for those present (the last one wins if repeated).
     code : str or None
         The last python (or untagged) fenced code block; None when the answer has none.
+    blocks : tuple of str
+        Every python (or untagged) fenced code block, in order.
+    open_block : bool
+        The last code block is never closed: the answer ends inside it (cut off, or the
+        fence was forgotten).
     """
 
     sections: dict[str, str]
     code: str | None
+    blocks: tuple[str, ...] = ()
+    open_block: bool = False
 
 
 def parse_response(text: str) -> ParsedResponse:
@@ -98,11 +112,14 @@ def parse_response(text: str) -> ParsedResponse:
     """
     lines = text.splitlines()
     headings: list[tuple[int, str]] = []
-    code: str | None = None
     fences = list(_fences(lines))
-    for start, stop, tag in fences:
-        if tag in _CODE_TAGS:
-            code = "\n".join(lines[start:stop]).strip("\n") + "\n"
+    blocks = tuple(
+        "\n".join(lines[start:stop]).strip("\n") + "\n"
+        for start, stop, tag in fences
+        if tag in _CODE_TAGS
+    )
+    code_fences = [stop for _, stop, tag in fences if tag in _CODE_TAGS]
+    open_block = bool(code_fences) and code_fences[-1] >= len(lines)
     inside = {i for start, stop, _ in fences for i in range(start - 1, stop + 1)}
     for i, line in enumerate(lines):
         match = _HEADING.match(line)
@@ -114,7 +131,8 @@ def parse_response(text: str) -> ParsedResponse:
     bounds = [i for i, _ in headings] + [len(lines)]
     for (i, key), end in zip(headings, bounds[1:], strict=True):
         sections[key] = "\n".join(lines[i + 1 : end]).strip()
-    return ParsedResponse(sections=sections, code=code)
+    code = blocks[-1] if blocks else None
+    return ParsedResponse(sections=sections, code=code, blocks=blocks, open_block=open_block)
 
 
 def _fences(lines: list[str]) -> Iterator[tuple[int, int, str]]:
@@ -225,6 +243,9 @@ class _Checker(ast.NodeVisitor):
     def _imports_hint(self) -> str:
         if not self.allowed:
             return "this task's code may not import anything"
+        own = [name for name in self.allowed if name not in HARMLESS_IMPORTS]
+        if len(own) < len(self.allowed):
+            return f"only {', '.join(own)} and standard helpers such as typing may be imported"
         return f"only {_listing(self.allowed)} may be imported"
 
     def _check_module(self, node: ast.AST, dotted: str) -> bool:

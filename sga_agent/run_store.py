@@ -268,6 +268,14 @@ class RunStore:
         _write(folder / "response.txt", proposal.get("text", ""))
         _dump(folder / "proposal.json", {k: v for k, v in proposal.items() if k != "text"})
 
+    def save_answer_parts(self, candidate: str, parts: dict[str, str]) -> None:
+        """The parts of a model's answer worth reading apart (its analysis, plan and
+        reasoning), each ``<name>.md`` in the candidate's folder; empty ones are not written."""
+        folder = self.candidate_dir(candidate)
+        for name, text in parts.items():
+            if text.strip():
+                _write(folder / f"{name}.md", text.strip() + "\n")
+
     def save_evaluation(self, candidate: str, code: str | None, evaluation: Evaluation) -> None:
         folder = self.candidate_dir(candidate)
         if code is not None:

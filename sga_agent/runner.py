@@ -81,7 +81,16 @@ def make_proposer(config: SearchConfig, task: Task) -> Proposer:
         return BuiltinAdapter(builtin)
     from sga_agent.proposers.litellm_backbone import BackboneSettings, LiteLLMProposer
 
-    return LiteLLMProposer(BackboneSettings(model=config.proposer, api_base=config.api_base))
+    model = config.model
+    return LiteLLMProposer(
+        BackboneSettings(
+            model=config.proposer,
+            api_base=config.api_base,
+            timeout_s=model.request_timeout_s,
+            max_retries=model.retries,
+            price_per_million=model.price,
+        )
+    )
 
 
 def replayed_answers(config: SearchConfig) -> dict[str, dict[str, Any]]:

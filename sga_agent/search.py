@@ -1,11 +1,14 @@
 """The outer loop of the bilevel search (Algorithm 1 of the paper).
 
 Evaluate the task's seed; then, each iteration, show the model the top-K solutions (worst
-first, best last), ask for ``exploit`` offspring at the low temperature and ``explore`` at the
-high one, evaluate them in sandboxed workers (identical code once) and push them onto the
-heap. Every model answer and every finished evaluation is an event in the run store before
-anything else happens, and both are looked up there first, so a killed run resumes without
-asking the model again or re-evaluating what was finished.
+first, best last; one per form, so the K are K different laws where that many exist) and what
+went wrong in the last iteration, ask for ``exploit`` offspring at the low temperature and
+``explore`` at the high one, read each answer as a person would (:mod:`sga_agent.reading`),
+evaluate them in sandboxed workers (identical code once) and push them onto the heap. Every
+model answer and every finished evaluation is an event in the run store before anything else
+happens, and both are looked up there first, so a killed run resumes without asking the model
+again or re-evaluating what was finished. A model that cannot be asked stops the search, once
+the answers already received are evaluated.
 """
 
 from __future__ import annotations
@@ -21,11 +24,13 @@ from typing import Any, Protocol
 
 from sga_agent import events as ev
 from sga_agent.config import ConfigError, SearchConfig
-from sga_agent.fingerprint import fingerprint
+from sga_agent.failures import Outcome, failures_text
+from sga_agent.fingerprint import fingerprint, form_fingerprint
 from sga_agent.heap import Entry, SolutionHeap
-from sga_agent.parsing import check_candidate, parse_response
-from sga_agent.prompting import Shown, build_messages
+from sga_agent.parsing import check_candidate
+from sga_agent.prompting import Shown, count_tokens, fit_to_budget
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
+from sga_agent.reading import read_answer
 from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
@@ -127,6 +132,11 @@ class Search:
         self._screen_fingerprints: dict[str, tuple[str, Evaluation]] = {}
         self._screened_losses: dict[str, float] = {}  # fingerprint -> valid screen's loss
         self._captured: dict[str, Any] = {}  # fingerprint -> a promoted screen's captured data
+        self._fixes: dict[str, list[str]] = {}  # candidate -> slips fixed on reading its answer
+        self._codes: dict[str, str] = {}  # candidate -> the code read from its answer
+        self._forms: dict[str, str] = {}  # form fingerprint -> the first candidate of that form
+        self._same_form: dict[str, str] = {}  # candidate -> the earlier one of its form
+        self._template = task.prompt_parts().template
         self.heap = SolutionHeap(config.loop.parsimony)
         self.totals = Totals(seconds=recorded.seconds)
         self._seconds_before = recorded.seconds  # the run's earlier sessions
@@ -141,8 +151,9 @@ class Search:
         Raises
         ------
         ProposerError
-            The proposer failed in a way that asking again cannot fix (no API key, nothing at
-            the address, an unknown model); the run stays resumable, without a summary.
+            The proposer could not be asked (no API key, nothing at the address, an unknown
+            model, or a provider that gave up after its retries); the answers received before
+            are evaluated and the run stays resumable, without a summary.
         """
         self._emit(ev.SearchStarted(resumed=bool(self._evaluations)))
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
@@ -152,13 +163,20 @@ class Search:
             if stopped:
                 break
             self._emit(ev.IterationStarted(iteration))
-            answers = self._answers_for(iteration, self.heap.top(self.loop.top_k))
+            spent = (self.totals.tokens, self.totals.cost_usd)
+            answers, failure = self._answers_for(iteration, self._shown())
             stopped = self._evaluate_iteration(
-                [(candidate, *self._extract(proposal)) for candidate, proposal in answers]
+                [
+                    (candidate, *self._extract(candidate, proposal))
+                    for candidate, proposal in answers
+                ]
             )
+            if failure is not None:
+                raise failure  # the answers in hand are evaluated: the run resumes from here
             top = [entry.summary() for entry in self.heap.top(self.loop.top_k)]
             self.store.save_heap(iteration, top)
-            self._emit(ev.IterationDone(iteration, top))
+            tokens = self.totals.tokens - spent[0]
+            self._emit(ev.IterationDone(iteration, top, tokens, self.totals.cost_usd - spent[1]))
             if stopped:
                 break
         result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.loop.top_k))
@@ -178,29 +196,49 @@ class Search:
             for j in range(cfg.explore)
         ]
 
-    def _answers_for(self, iteration: int, shown: list[Entry]) -> list[tuple[str, dict[str, Any]]]:
-        """(candidate, proposal dict) of every slot that has an answer, recorded or new.
+    def _shown(self) -> list[Entry]:
+        """The solutions the next prompt shows: the best valid one of each form, K at most
+        (the same law with other constants, or the same loss, counts once)."""
+        return self.heap.distinct_top(self.loop.top_k, form_fingerprint)
 
-        The prompt shows ``shown`` (the top-K); it is built only if the proposer reads it.
+    def _answers_for(
+        self, iteration: int, shown: list[Entry]
+    ) -> tuple[list[tuple[str, dict[str, Any]]], ProposerError | None]:
+        """(candidate, proposal dict) of every slot that has an answer, recorded or new, and
+        the proposer's error that stopped the asking (None if none).
+
+        The prompt shows ``shown`` (the top-K, one per law) and the last iteration's
+        failures; it is built only if the proposer reads it. A proposer that does not (an
+        LLM-free one) breeds from the heap's top-K as it stands. Each answer records the ids
+        of the solutions it was shown, or bred from, worst first (``parents``).
         """
         slots = self._slots(iteration)
         missing: dict[float, list[str]] = {}
         for candidate, temperature in slots:
             if candidate not in self._answers:
                 missing.setdefault(temperature, []).append(candidate)
-        prompt = functools.cache(functools.partial(self._messages, shown))
-        parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in shown]
+        prompt = functools.cache(functools.partial(self._messages, shown, iteration))
+        top = self.heap.top(self.loop.top_k)  # what a proposer without a prompt breeds from
+        parents = [Parent(entry.code, entry.loss, entry.parameters) for entry in top]
+        failure = None
         for temperature, candidates in missing.items():
             if self._budget_reached():
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
             tried = [self._answers[c]["text"] for c in sorted(self._answers)]
             request = ProposalRequest(candidates, temperature, seed, parents, prompt, tried)
-            new = self._ask(request)
+            try:
+                new = list(self.proposer.propose(request))[: request.n]
+            except ProposerError as error:
+                self._emit(ev.ProposerFailed(str(error), error.transient))
+                failure = error
+                break
+            read = shown if request.built_messages is not None else top
             for candidate, proposal in zip(candidates, new, strict=False):
-                data = proposal.to_dict()
+                data = {**proposal.to_dict(), "parents": [e.candidate for e in reversed(read)]}
                 self._answers[candidate] = data
                 self.store.save_proposal(candidate, request.built_messages, data)
+                self._save_answer(candidate, proposal)
                 self._emit(ev.ProposalReceived(candidate, data))
             for candidate in candidates[len(new) :]:
                 self._emit(ev.ProposalMissing(candidate))
@@ -213,34 +251,70 @@ class Search:
                 )
                 self.totals.cost_usd += float(data.get("cost_usd", 0.0))
                 answers.append((candidate, data))
-        return answers
+        return answers, failure
 
-    def _messages(self, shown: list[Entry]) -> Messages:
-        """The prompt showing ``shown``."""
+    def _save_answer(self, candidate: str, proposal: Proposal) -> None:
+        """The answer's analysis, plan and reasoning (the provider's and its ``<think>``
+        part), each as a file of the candidate's folder."""
+        reading = read_answer(proposal.text, self.task.kind, self._template)
+        sections = reading.parsed.sections if reading.parsed is not None else {}
+        reasoning = "\n\n".join(part for part in (proposal.reasoning, reading.reasoning) if part)
+        self.store.save_answer_parts(
+            candidate,
+            {"analysis": sections.get("analysis", ""), "plan": sections.get("plan", ""),
+             "reasoning": reasoning.strip()},
+        )  # fmt: skip
+
+    def _messages(self, shown: list[Entry], iteration: int) -> Messages:
+        """The prompt showing ``shown`` and what went wrong in the iteration before
+        ``iteration``, within the prompt's token budget."""
         history = [Shown(entry.code, entry.feedback, entry.loss) for entry in shown]
-        return build_messages(self.task.kind, self.task.prompt_parts(), history)
+        messages, _ = fit_to_budget(
+            self.task.kind,
+            self.task.prompt_parts(),
+            history,
+            self._failures(iteration - 1),
+            self.config.model.prompt_tokens,
+            count_tokens(self.config.proposer),
+        )
+        return messages
 
-    def _ask(self, request: ProposalRequest) -> list[Proposal]:
-        """The proposer's answers; a transient failure is recorded and gives none."""
-        try:
-            return list(self.proposer.propose(request))[: request.n]
-        except ProposerError as error:
-            self._emit(ev.ProposerFailed(str(error), error.transient))
-            if not error.transient:
-                raise
-            return []
+    def _failures(self, iteration: int) -> str:
+        """The failure section for ``iteration``'s answers (:mod:`sga_agent.failures`)."""
+        prefix = f"{iteration:02d}-"
+        outcomes = []
+        for candidate in sorted(self._answers):
+            if not candidate.startswith(prefix):
+                continue
+            record = self._evaluations.get(candidate) or self._screens.get(candidate)
+            if record is None:
+                continue
+            code = self._codes.get(candidate, self._answers[candidate].get("text", ""))
+            fixes = record.extras.get("read_as") or []
+            outcomes.append(Outcome(candidate, code, record.to_dict(), fixes))
+        earlier = {
+            entry.candidate: entry.loss
+            for entry in self.heap.entries
+            if entry.valid and entry.candidate < prefix
+        }
+        return failures_text(outcomes, earlier)
 
-    def _extract(self, proposal: dict[str, Any]) -> tuple[str, Evaluation | None]:
-        """The answer's code, and an invalid evaluation when it cannot be run."""
-        parsed = parse_response(proposal["text"])
-        if parsed.code is None:
-            reason = "the answer has no ```python code block; put the code in one block"
-            return proposal["text"], Evaluation.invalid(reason)
+    def _extract(self, candidate: str, proposal: dict[str, Any]) -> tuple[str, Evaluation | None]:
+        """The answer's code, read as a person would (its slips fixed and recorded), and an
+        invalid evaluation when it cannot be run."""
+        reading = read_answer(
+            proposal["text"], self.task.kind, self._template, proposal.get("finish_reason", "")
+        )
+        if reading.fixes:
+            self._fixes[candidate] = reading.fixes
+        if reading.code is None:
+            return proposal["text"], Evaluation.invalid(reading.problem)
+        self._codes[candidate] = reading.code
         try:
-            check_candidate(parsed.code, self.task)
+            check_candidate(reading.code, self.task)
         except CodeRejected as error:
-            return parsed.code, Evaluation.invalid(f"the code was rejected before it ran: {error}")
-        return parsed.code, None
+            return reading.code, Evaluation.invalid(f"the code was rejected before it ran: {error}")
+        return reading.code, None
 
     # ------------------------------------------------------------------ evaluations
 
@@ -275,6 +349,8 @@ class Search:
         for candidate, code, rejection in candidates:
             key = fingerprint(code)
             evaluated = candidate in self._evaluations or key in self._fingerprints
+            if rejection is None:
+                self._note_form(candidate, code)
             if rejection is not None or (evaluated and candidate not in self._screens):
                 passed.add(candidate)  # a screened one stays in the ranking (a resume)
                 continue
@@ -316,6 +392,7 @@ class Search:
 
     def _store_screen(self, candidate: str, code: str, evaluation: Evaluation) -> None:
         """Write a finished screen to the run store (its event last: the commit point)."""
+        evaluation = self._marked(candidate, evaluation)
         self._screens[candidate] = evaluation
         self.store.save_screen(candidate, code, evaluation)
         self._count_screen(evaluation)
@@ -344,6 +421,8 @@ class Search:
         for candidate, code, rejection in candidates:
             key = fingerprint(code)
             known = candidate in self._evaluations or key in self._fingerprints
+            if rejection is None:
+                self._note_form(candidate, code)
             if rejection is not None:
                 if candidate not in self._evaluations:
                     self._store(candidate, code, rejection)
@@ -373,8 +452,27 @@ class Search:
             return self.evaluator.submit(self.config.task, code, self.settings)
         return self.evaluator.submit(self.config.task, code, self.settings, captured=captured)
 
+    def _note_form(self, candidate: str, code: str) -> None:
+        """Remember the first candidate of ``code``'s form; a later one of the same form (the
+        same law with other constants) is marked ``same_form_as`` it when stored."""
+        first = self._forms.setdefault(form_fingerprint(code), candidate)
+        if first != candidate:
+            self._same_form[candidate] = first
+
+    def _marked(self, candidate: str, evaluation: Evaluation) -> Evaluation:
+        """``evaluation`` with what the search knows of its answer in its extras: the slips
+        fixed on reading it (``read_as``) and the earlier candidate of its form."""
+        extras = dict(evaluation.extras)
+        if self._fixes.get(candidate):
+            extras["read_as"] = self._fixes[candidate]
+        first = self._same_form.get(candidate)
+        if first and "duplicate_of" not in extras:
+            extras["same_form_as"] = first
+        return dataclasses.replace(evaluation, extras=extras)
+
     def _store(self, candidate: str, code: str, evaluation: Evaluation) -> None:
         """Write a finished evaluation to the run store (its event last: the commit point)."""
+        evaluation = self._marked(candidate, evaluation)
         self._evaluations[candidate] = evaluation
         self.store.save_evaluation(candidate, code, evaluation)
         event = {k: v for k, v in evaluation.to_dict().items() if k != "artifacts"}

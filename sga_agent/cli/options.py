@@ -83,3 +83,25 @@ def registered_task(ctx: click.Context, param: click.Parameter, name: str) -> st
 def task_or_factory(ctx: click.Context, param: click.Parameter, name: str) -> str:
     """As :func:`registered_task`, but a ``module:callable`` factory passes unchecked."""
     return name if ":" in name else registered_task(ctx, param, name)
+
+
+class Price(click.ParamType):
+    """``IN,OUT``: USD per million input and output tokens."""
+
+    name = "price"
+
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None):
+        if isinstance(value, tuple):
+            return value
+        parts = str(value).replace(" ", "").split(",")
+        try:
+            prices = tuple(float(part) for part in parts)
+        except ValueError:
+            prices = ()
+        if len(prices) != 2 or not all(0 <= p < float("inf") for p in prices):
+            self.fail(
+                f"{value!r} is not two prices: give USD per million input and output tokens "
+                "as IN,OUT, e.g. --price 2.5,10",
+                param, ctx,
+            )  # fmt: skip
+        return prices

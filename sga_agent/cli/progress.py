@@ -14,11 +14,15 @@ from rich.syntax import Syntax
 from rich.table import Table
 
 from sga_agent import events as ev
+from sga_agent.causes import cause_of, top_causes
 from sga_agent.config import UNTIL_BUDGET, SearchConfig
 from sga_agent.run_store import Recorded, RunStore
 from sga_agent.runner import BUILTIN, REPLAY_PREFIX
 from sga_agent.search import SEED, SearchResult
 from sga_agent.task import Evaluation, Task, as_task, solution_with_parameters
+
+#: Causes of failure the final screen names, the most frequent first.
+CAUSES = 3
 
 
 def uses_a_model(config: SearchConfig) -> bool:
@@ -112,14 +116,16 @@ def print_result(
     config: SearchConfig,
 ) -> None:
     """The final screen: the top-K table, the best solution against the seed, the best
-    solution with its fitted constants, the counts by status and the report command (or the
-    run summary as JSON)."""
+    solution with its fitted constants, the counts by status, the most frequent causes of
+    failure and the report command (or the run summary as JSON, the causes under "causes")."""
     summary = json.loads((store.path / "summary.json").read_text(encoding="utf-8"))
     summary["run"] = str(store.path)
+    run = store.recorded()
+    outcomes = answers(run)
     if as_json:
+        summary["causes"] = [[cause, count] for cause, count in top_causes(outcomes, CAUSES)]
         click.echo(json.dumps(summary))
         return
-    run = store.recorded()
     recorded = run.evaluations
     seed = recorded.get(SEED)
     table = Table("rank", "candidate", "loss", "x below the seed", title=f"top {len(result.top)}")
@@ -141,7 +147,29 @@ def print_result(
     else:
         console.print("no valid solution was found")
     console.print(_counts(recorded.values(), run.screens.values(), result, uses_a_model(config)))
+    if failures := failures_line(outcomes):
+        console.print(failures)
     console.print(f"report: sga-agent report {store.path}", soft_wrap=True)
+
+
+def answers(recorded: Recorded) -> list[dict[str, Any]]:
+    """How each candidate after the seed ended, as an evaluation's fields: its full
+    evaluation, else its screen (a multi-fidelity search's candidate never fitted fully)."""
+    outcomes = {**recorded.screens, **recorded.evaluations}
+    return [vars(e) for candidate, e in sorted(outcomes.items()) if candidate != SEED]
+
+
+def failures_line(outcomes: list[dict[str, Any]]) -> str:
+    """``"failures: F of N answers: n1 cause1; n2 cause2; ..."``, the :data:`CAUSES` most
+    frequent causes (:func:`~sga_agent.causes.cause_of`) and how many others; "" for none."""
+    failed = sum(bool(cause_of(outcome)) for outcome in outcomes)
+    if not failed:
+        return ""
+    top = top_causes(outcomes, CAUSES)
+    parts = [f"{count} {cause}" for cause, count in top]
+    if rest := failed - sum(count for _, count in top):
+        parts.append(f"{rest} of other causes")
+    return f"failures: {failed} of {len(outcomes)} answers: " + "; ".join(parts)
 
 
 def _ratio(seed: Evaluation | None, loss: float) -> str:

@@ -11,13 +11,18 @@ from sga_agent.cli import main
 from sga_agent.cli.search import check_executor, execute, prepare
 from sga_agent.config import ConfigError
 from sga_agent.events import RunResumed
+from sga_agent.proposers.base import Proposer, ProposerError
+from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.run_store import RunFolderFull, RunLocked, RunStore, RunStoreError
 
 
 @main.command()
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option("--ray-address", metavar="HOST:PORT",
-              help="Continue a run of --executor ray on this Ray cluster instead of its own.")
+@click.option(
+    "--ray-address",
+    metavar="HOST:PORT",
+    help="Continue a run of --executor ray on this Ray cluster instead of its own.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
 def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
     """Continue the search recorded in RUN_DIR.
@@ -51,6 +56,7 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
             raise click.UsageError(str(error)) from error
     check_executor(config)
     task, proposer = prepare(config, loaded)
+    check_model_answers(proposer, store)
     if store.recorded().finished:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
     try:
@@ -58,3 +64,16 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
         execute(config, store, as_json, proposer, task)
     except RunFolderFull as error:  # the disk is full: the message says what to do
         raise click.ClickException(str(error)) from error
+
+
+def check_model_answers(proposer: Proposer, store: RunStore) -> None:
+    """A model that does not answer yet stops the resume at once; the run stays as it was."""
+    if isinstance(proposer, LiteLLMProposer):
+        try:
+            proposer.check_reachable()
+        except ProposerError as error:
+            store.unlock()
+            raise click.ClickException(
+                f"{error}\nthe run is unchanged: `sga-agent resume {store.path}` again once the "
+                "model answers"
+            ) from error

@@ -13,6 +13,7 @@ from sga_agent.cli import main
 from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
 from sga_agent.cli.options import (
     Duration,
+    Price,
     registered_task,
     task_options,
     typed_task_options,
@@ -150,6 +151,19 @@ def from_preset(name: str) -> str:
               help="CPUs each evaluation reserves on its Ray node.")
 @click.option("--ray-memory-mb", type=click.IntRange(min=1), show_default="none",
               help="Memory each evaluation reserves on its Ray node, MiB.")
+@click.option("--request-timeout", "request_timeout_s", type=click.FloatRange(min=0, min_open=True),
+              show_default=str(default("request_timeout_s")),
+              help="Seconds one request to the model may take before it is retried.")
+@click.option("--retries", type=click.IntRange(min=0), show_default=str(default("retries")),
+              help="Further attempts after a model request timed out, was rate-limited or "
+              "failed on the server; then the search stops (resumable).")
+@click.option("--prompt-tokens", type=click.IntRange(min=500),
+              show_default=str(default("prompt_tokens")),
+              help="Most tokens of a prompt (litellm's counter for the model): earlier "
+              "solutions' feedback is shortened, the worst first, to fit.")
+@click.option("--price", type=Price(), metavar="IN,OUT",
+              help="USD per million input and output tokens, e.g. 2.5,10: for a model "
+              "litellm cannot price (then needed by --max-usd), or to override its price.")
 @click.option("--max-usd", type=click.FloatRange(min=0, min_open=True), help="Budget in USD.")
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
@@ -195,7 +209,9 @@ def search(
     except (ConfigError, RunStoreError) as error:
         raise click.UsageError(str(error)) from error
     check_executor(config)
+    check_pricing(config)
     set_up, chosen = prepare(config, loaded)
+    check_reachable(chosen)
     if builtin:  # after every usage error
         click.echo(
             "no --model: the task's built-in LLM-free proposer searches (preset quick); "
@@ -213,6 +229,33 @@ def check_executor(config: SearchConfig) -> None:
             import_ray()
         except RayUnavailableError as error:
             raise click.UsageError(str(error)) from error
+
+
+def check_pricing(config: SearchConfig) -> None:
+    """A money budget for a model litellm cannot price, with no ``--price``, is a usage error:
+    its cost would count as 0 and the budget would never stop the run."""
+    if config.budgets.max_usd is None or config.model.price is not None:
+        return
+    if runner.is_builtin(config.proposer) or config.proposer.startswith(runner.REPLAY_PREFIX):
+        return
+    from sga_agent.proposers.litellm_backbone import is_priced
+
+    if not is_priced(config.proposer):
+        raise click.UsageError(
+            f"--max-usd needs a price, and litellm's price map has none for "
+            f"{config.proposer}: give one with --price IN,OUT (USD per million input and "
+            "output tokens, e.g. --price 2.5,10)"
+        )
+
+
+def check_reachable(proposer: Proposer) -> None:
+    """Ask a model for one word before anything starts, so that a provider that is down,
+    refuses the key or does not know the model stops the command at once (no run folder)."""
+    if isinstance(proposer, LiteLLMProposer):
+        try:
+            proposer.check_reachable()
+        except ProposerError as error:
+            raise click.ClickException(f"{error}\nno run was started") from error
 
 
 def prepare(config: SearchConfig, loaded: TaskBase) -> tuple[TaskBase, Proposer]:

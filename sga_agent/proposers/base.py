@@ -41,6 +41,15 @@ class Proposal:
         Why the cost may be wrong, e.g. the model is not in litellm's price map; empty if priced.
     seconds : float
         Wall time of the request that produced it, retries included.
+    finish_reason : str
+        Why the model stopped, as the provider said: "stop", "length" (cut off at the token
+        limit), "content_filter", ...; empty when unknown.
+    reasoning : str
+        The provider's reasoning for it, when it sends one apart from the answer
+        (``reasoning_content`` of DeepSeek-R1, vLLM's reasoning parsers, ...).
+    truncated_before : int
+        Answers to the same slot that were cut off at the token limit and asked again with
+        more room; their tokens and cost are included here.
     """
 
     text: str
@@ -51,13 +60,19 @@ class Proposal:
     cost_usd: float = 0.0
     cost_note: str = ""
     seconds: float = 0.0
+    finish_reason: str = ""
+    reasoning: str = ""
+    truncated_before: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Proposal:
-        return cls(**data)
+        """The proposal ``to_dict`` wrote; keys it does not know (a record's own, such as the
+        parents the search adds) are left out."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{key: value for key, value in data.items() if key in names})
 
 
 @dataclass
@@ -110,10 +125,11 @@ class ProposalRequest:
 class ProposerError(RuntimeError):
     """The model could not be asked (after retries); the message names the cause and the fix.
 
-    ``transient`` is True when a later request may well succeed (rate limits, timeouts, server
-    errors that outlasted the retries); otherwise (no key, a refused key, an unknown model,
-    nothing listening at the address) asking again is pointless and the search stops.
-    Messages never contain API keys: proposers redact them before raising.
+    The search stops on it, resumable, with every finished evaluation kept. ``transient`` is
+    True when a later request may well succeed (rate limits, timeouts, server errors that
+    outlasted the retries: a resume once the provider answers again); otherwise (no key, a
+    refused key, an unknown model, nothing listening at the address) the setting must change
+    first. Messages never contain API keys: proposers redact them before raising.
     """
 
     def __init__(self, message: str, transient: bool = False) -> None:
@@ -126,9 +142,9 @@ class Proposer(Protocol):
     """Anything that answers a :class:`ProposalRequest`.
 
     ``propose`` returns up to ``request.n`` proposals, for the request's candidates in order:
-    all of them, or fewer (for the first ones) when some failed but at least one succeeded. It
-    raises :class:`ProposerError` only when none succeeded, and returns an empty list for
-    ``n == 0``.
+    all of them, or fewer (for the first ones) when some failed or, for a recorded run, were
+    never recorded. It raises :class:`ProposerError` when the model could not be asked at all,
+    which stops the search, and returns an empty list for ``n == 0``.
     """
 
     @property

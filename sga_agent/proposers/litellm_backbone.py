@@ -10,6 +10,7 @@ log lines written here.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import difflib
 import logging
 import math
@@ -40,7 +41,9 @@ RETRY_STATUSES = frozenset({408, 429})
 #: HTTP statuses of a key the provider refused (unauthenticated, forbidden).
 AUTH_STATUSES = frozenset({401, 403})
 LITELLM_LOGGERS = ("LiteLLM", "LiteLLM Router", "LiteLLM Proxy")
-NO_PRICE_NOTE = "model not in litellm's price map: cost counted as 0"
+NO_PRICE_NOTE = "model not in litellm's price map: cost counted as 0 (give --price)"
+#: Tokens of the one-word reply asked before a search starts (:meth:`check_reachable`).
+PING_TOKENS = 5
 #: The API-key variables of common providers, any one of which will do (as litellm's
 #: ``validate_environment`` names them; ``()``: no key needed), so that a missing key is
 #: reported without importing litellm. Other providers are asked of litellm.
@@ -107,6 +110,9 @@ class BackboneSettings:
     drop_params : bool
         Let litellm drop parameters a model refuses (e.g. temperature for some reasoning
         models) instead of failing.
+    price_per_million : (float, float), optional
+        USD per million input and output tokens, for a model litellm's price map lacks (or to
+        override it); None: litellm's price, 0 with a note where it has none.
     """
 
     model: str
@@ -118,6 +124,7 @@ class BackboneSettings:
     concurrency: int = 4
     use_n: bool | None = None
     drop_params: bool = True
+    price_per_million: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         provider, _, name = self.model.partition("/")
@@ -141,6 +148,14 @@ class BackboneSettings:
             raise BackboneSettingsError(f"concurrency must be at least 1, got {self.concurrency}")
         if self.max_tokens is not None and self.max_tokens < 1:
             raise BackboneSettingsError(f"max_tokens must be at least 1, got {self.max_tokens}")
+        price = self.price_per_million
+        if price is not None and not (
+            len(price) == 2 and all(math.isfinite(p) and p >= 0 for p in price)
+        ):
+            raise BackboneSettingsError(
+                f"price_per_million must be two numbers >= 0 (USD per million input and output "
+                f"tokens), got {price!r}"
+            )
 
     @property
     def provider(self) -> str:
@@ -218,7 +233,8 @@ class LiteLLMProposer:
         return self.sample(request.messages(), request.temperature, request.n)
 
     def sample(self, messages: list[dict[str, str]], temperature: float, n: int) -> list[Proposal]:
-        """Up to ``n`` sampled responses to ``messages`` at ``temperature``.
+        """Up to ``n`` sampled responses to ``messages`` at ``temperature``; an answer cut off
+        at the token limit is asked once more, alone, with twice the room.
 
         Raises
         ------
@@ -230,12 +246,56 @@ class LiteLLMProposer:
         if n == 0:
             return []
         if not (self.use_n and n > 1):
-            return self._singles(messages, temperature, n)
-        proposals = self._request(messages, temperature, n)
-        if len(proposals) < n:
-            log.info("%s returned %d of %d choices", self.settings.model, len(proposals), n)
-            proposals += self._singles(messages, temperature, n - len(proposals), required=False)
-        return proposals[:n]
+            proposals = self._singles(messages, temperature, n)
+        else:
+            proposals = self._request(messages, temperature, n)
+            if len(proposals) < n:
+                log.info("%s returned %d of %d choices", self.settings.model, len(proposals), n)
+                proposals += self._singles(
+                    messages, temperature, n - len(proposals), required=False
+                )
+        return [self._finished(messages, temperature, p) for p in proposals[:n]]
+
+    def check_reachable(self) -> None:
+        """Ask the model for one short reply, with the run's timeout and retries, so that a
+        provider that is down, refuses the key or does not know the model is found before
+        anything else starts.
+
+        Raises
+        ------
+        ProposerError
+            The request failed; the message names the model, the cause and the fix.
+        """
+        self.check_keys()
+        ping = [{"role": "user", "content": "Reply with the single word: ready"}]
+        self._request(ping, 0.0, 1, max_tokens=PING_TOKENS)
+
+    def _finished(
+        self, messages: list[dict[str, str]], temperature: float, proposal: Proposal
+    ) -> Proposal:
+        """``proposal``, or, when it was cut off at the token limit, the answer to one more
+        request with twice its room (its tokens and cost added); the cut-off one if that
+        request fails."""
+        if proposal.finish_reason != "length":
+            return proposal
+        room = 2 * max(proposal.completion_tokens, self.settings.max_tokens or 0, 1024)
+        log.warning(
+            "an answer of %s was cut off after %d tokens; asking again with max_tokens=%d",
+            self.settings.model, proposal.completion_tokens, room,
+        )  # fmt: skip
+        try:
+            (again,) = self._request(messages, temperature, 1, max_tokens=room)
+        except ProposerError as error:
+            log.warning("asking again failed (%s); keeping the cut-off answer", error)
+            return proposal
+        return dataclasses.replace(
+            again,
+            prompt_tokens=again.prompt_tokens + proposal.prompt_tokens,
+            completion_tokens=again.completion_tokens + proposal.completion_tokens,
+            cost_usd=again.cost_usd + proposal.cost_usd,
+            seconds=again.seconds + proposal.seconds,
+            truncated_before=proposal.truncated_before + 1,
+        )
 
     def _singles(
         self, messages: list[dict[str, str]], temperature: float, count: int, required: bool = True
@@ -263,9 +323,14 @@ class LiteLLMProposer:
         return proposals
 
     def _request(
-        self, messages: list[dict[str, str]], temperature: float, n: int
+        self,
+        messages: list[dict[str, str]],
+        temperature: float,
+        n: int,
+        max_tokens: int | None = None,
     ) -> list[Proposal]:
-        """One request for ``n`` choices, retried on transient failures."""
+        """One request for ``n`` choices, retried on transient failures (an answer with no
+        choices among them); ``max_tokens`` overrides the settings'."""
         settings = self.settings
         kwargs: dict[str, Any] = {
             "model": settings.model,
@@ -279,13 +344,15 @@ class LiteLLMProposer:
             kwargs["n"] = n
         if settings.api_base is not None:
             kwargs["api_base"] = settings.api_base
-        if settings.max_tokens is not None:
-            kwargs["max_tokens"] = settings.max_tokens
+        if (max_tokens or settings.max_tokens) is not None:
+            kwargs["max_tokens"] = max_tokens or settings.max_tokens
         attempts = settings.max_retries + 1
         start = time.monotonic()
         for attempt in range(attempts):
             try:
                 response = self._completion(**kwargs)
+                if not getattr(response, "choices", None):
+                    raise EmptyAnswer(f"{settings.model} answered with no choices")
                 break
             except Exception as error:
                 retry, message = self._diagnose(error)
@@ -312,10 +379,12 @@ class LiteLLMProposer:
         lm = self._litellm
         model = self.settings.model
         text = _describe_error(error)
+        if isinstance(error, EmptyAnswer):
+            return True, str(error)
         if isinstance(error, lm.Timeout):
             return True, (
-                f"{model} did not answer within timeout_s={self.settings.timeout_s:g} s "
-                f"(raise timeout_s, or check the server): {text}"
+                f"{model} did not answer within {self.settings.timeout_s:g} s "
+                f"(--request-timeout; or check the server): {text}"
             )
         missing = self._missing_key_message()
         if missing:
@@ -367,14 +436,15 @@ class LiteLLMProposer:
         return f"no API key for {self.settings.model}: set {' or '.join(missing)}{hint}"
 
     def _proposals(self, response: Any, temperature: float, seconds: float) -> list[Proposal]:
-        """One proposal per choice, sharing the response's tokens and cost among them."""
+        """One proposal per choice, sharing the response's tokens and cost among them, each
+        with its finish reason and the provider's reasoning, if it sent any."""
         choices = response.choices
-        if not choices:
-            raise ProposerError(f"{self.settings.model} answered with no choices")
         usage = getattr(response, "usage", None)
-        prompt = _shares(int(getattr(usage, "prompt_tokens", 0) or 0), len(choices))
-        completion = _shares(int(getattr(usage, "completion_tokens", 0) or 0), len(choices))
-        cost, note = self._cost(response)
+        prompt_total = int(getattr(usage, "prompt_tokens", 0) or 0)
+        completion_total = int(getattr(usage, "completion_tokens", 0) or 0)
+        prompt = _shares(prompt_total, len(choices))
+        completion = _shares(completion_total, len(choices))
+        cost, note = self._cost(response, prompt_total, completion_total)
         return [
             Proposal(
                 text=choice.message.content or "",
@@ -385,16 +455,35 @@ class LiteLLMProposer:
                 cost_usd=cost / len(choices),
                 cost_note=note,
                 seconds=seconds,
+                finish_reason=str(getattr(choice, "finish_reason", "") or ""),
+                reasoning=str(getattr(choice.message, "reasoning_content", "") or ""),
             )
             for i, choice in enumerate(choices)
         ]
 
-    def _cost(self, response: Any) -> tuple[float, str]:
-        """The response's price in USD from litellm's local price map, or 0 with a note."""
+    def _cost(self, response: Any, prompt_tokens: int, completion_tokens: int) -> tuple[float, str]:
+        """The response's price in USD: from the given price per million tokens, else from
+        litellm's local price map, else 0 with a note."""
+        price = self.settings.price_per_million
+        if price is not None:
+            return (prompt_tokens * price[0] + completion_tokens * price[1]) / 1e6, ""
         try:
             return float(self._litellm.completion_cost(completion_response=response)), ""
         except Exception:
             return 0.0, NO_PRICE_NOTE
+
+
+class EmptyAnswer(RuntimeError):
+    """The provider answered without choices (retried like a server error)."""
+
+
+def is_priced(model: str) -> bool:
+    """Whether litellm's local price map prices ``model`` (its cost can be counted)."""
+    try:
+        info = import_litellm().get_model_info(model=model)
+    except Exception:
+        return False
+    return bool(info.get("input_cost_per_token") or info.get("output_cost_per_token"))
 
 
 def missing_keys(model: str, api_base: str | None = None) -> list[str]:

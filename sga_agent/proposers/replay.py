@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from sga_agent.proposers.base import Proposal, ProposalRequest, ProposerError
+from sga_agent.proposers.base import Proposal, ProposalRequest
 from sga_agent.run_store import RunStore
 
 
@@ -13,8 +13,8 @@ class ReplayProposer:
     """Gives each candidate slot the answer the run in ``run_dir`` recorded for it.
 
     A slot the recorded run has no answer for gets none (nor do the slots after it in the same
-    request, as a model's short answer would leave them): a transient :class:`ProposerError`
-    when it is the first, so the search records it and goes on.
+    request, as a model's short answer would leave them); the search records them as missing
+    and goes on.
 
     Raises
     ------
@@ -36,9 +36,4 @@ class ReplayProposer:
             if candidate not in self.answers:
                 break
             proposals.append(Proposal.from_dict(self.answers[candidate]))
-        if request.candidates and not proposals:
-            raise ProposerError(
-                f"the replayed run {self.store.path} has no answer for {request.candidates[0]}",
-                transient=True,
-            )
         return proposals

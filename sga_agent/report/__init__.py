@@ -1,8 +1,9 @@
 """``sga-agent report``: a static report (Markdown and HTML with PNG figures) of one run folder.
 
 :mod:`.data` reads the run folder into plain records, :mod:`.findings` states what the run
-found (with the task's own assessment), :mod:`.plots` draws the search figures, :mod:`.render`
-writes ``report.md`` and ``report.html``; :func:`build_report` ties them together. What is
+found (with the task's own assessment), :mod:`.plots` draws the search figures,
+:mod:`.candidates` tables every candidate, :mod:`.render` writes ``report.md`` and
+``report.html``; :func:`build_report` ties them together. What is
 specific to a task (its free run, its molecules) comes from the task's report hooks
 (:class:`sga_agent.task.TaskBase`): this package imports no task.
 """

@@ -1,7 +1,8 @@
 """Assembling the report of one run folder: the findings and figures first, then the pages.
 
 The report leads with what a reader judges the run by (:mod:`.findings`), then the search's
-pictures, and ends with the records (settings, isolation, raw feedback) folded away.
+pictures and its candidates one by one (:mod:`.candidates`), and ends with the records
+(settings, isolation, raw feedback) folded away.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 from sga_agent.config import flat_settings
 from sga_agent.registry import load_task
 from sga_agent.report import plots
+from sga_agent.report.candidates import candidates_section
 from sga_agent.report.data import Run, read_run
 from sga_agent.report.findings import TOP, Findings, distinct, find
 from sga_agent.report.render import Code, Image, Section, Table, Text, write
@@ -181,6 +183,7 @@ def build_report(
         ]),
         Section("Outcomes per iteration",
                 [Image(figures[4].name, "outcomes per iteration"), outcomes_table(run)]),
+        candidates_section(run, folder),
         *records_sections(run, findings),
     ]  # fmt: skip
     pages = write(folder, f"Search report: {run.path.name}", sections)

@@ -8,10 +8,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sga_agent.causes import cause_of
 from sga_agent.config import current_format
 from sga_agent.events import CandidateEvaluated, ProposalReceived, SandboxReady
 from sga_agent.heap import ranked_loss
-from sga_agent.run_store import CONFIG, SUMMARY, RunStore
+from sga_agent.run_store import CONFIG, SCREEN, SUMMARY, RunStore
+
+
+@dataclass
+class Answer:
+    """What the proposer's answer left beside the code (a run from before these records has
+    only the temperature, or nothing)."""
+
+    temperature: float | None = None
+    finish_reason: str = ""  # "stop", "length" (cut off), ...; "" when unknown
+    parents: list[str] = field(default_factory=list)  # the candidates its prompt showed
+    analysis: str = ""
+    plan: str = ""
+    reasoning: str = ""  # the provider's own reasoning, apart from the answer
 
 
 @dataclass
@@ -29,6 +43,9 @@ class Candidate:
     curves: dict[str, list[float]] = field(default_factory=dict)
     folder: Path | None = None
     time: float | None = None  # when its evaluation was recorded (seconds since the epoch)
+    cause: str = ""  # why it failed, in one line (:func:`~sga_agent.causes.cause_of`)
+    answer: Answer | None = None  # None for the seed and other candidates no proposer wrote
+    screen_only: bool = False  # screened but never fitted fully: its status is the screen's
 
     def artifacts(self) -> dict[str, Any]:
         """What the trusted fit left for reports (read when asked: it can be large)."""
@@ -53,6 +70,7 @@ class Run:
     cost_usd: float = 0.0
     started: float | None = None  # the first event's time (seconds since the epoch)
     provenance: dict[str, Any] | None = None  # what the task recorded at the start
+    screened: list[Candidate] = field(default_factory=list)  # screens never fitted fully
 
     @property
     def task(self) -> str:
@@ -82,6 +100,11 @@ class Run:
         ranked = self.ranked()
         return ranked[0] if ranked else None
 
+    def every_candidate(self) -> list[Candidate]:
+        """The evaluated candidates and those only screened, by iteration, then id."""
+        every = [*self.candidates, *self.screened]
+        return sorted(every, key=lambda candidate: (candidate.iteration, candidate.id))
+
 
 def _read_json(path: Path, default: Any) -> Any:
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else default
@@ -91,11 +114,23 @@ def _read_text(path: Path) -> str:
     return path.read_text(encoding="utf-8") if path.is_file() else ""
 
 
-def read_candidate(folder: Path) -> Candidate | None:
-    """The candidate in ``folder``, or None while it has no ``evaluation.json`` yet."""
-    evaluation = _read_json(folder / "evaluation.json", None)
-    if evaluation is None:
+def read_answer(folder: Path) -> Answer | None:
+    """What a proposer recorded of its answer in ``folder`` (None when it recorded nothing)."""
+    proposal = _read_json(folder / "proposal.json", None)
+    if proposal is None:
         return None
+    temperature = proposal.get("temperature")
+    return Answer(
+        temperature=float(temperature) if isinstance(temperature, int | float) else None,
+        finish_reason=str(proposal.get("finish_reason") or ""),
+        parents=[str(parent) for parent in proposal.get("parents") or []],
+        analysis=_read_text(folder / "analysis.md"),
+        plan=_read_text(folder / "plan.md"),
+        reasoning=_read_text(folder / "reasoning.md"),
+    )
+
+
+def _candidate(folder: Path, evaluation: dict[str, Any], screen_only: bool = False) -> Candidate:
     return Candidate(
         id=folder.name,
         status=evaluation.get("status", "ok" if evaluation.get("valid") else "invalid"),
@@ -104,10 +139,28 @@ def read_candidate(folder: Path) -> Candidate | None:
         parameters=evaluation.get("parameters", {}),
         extras=evaluation.get("extras", {}),
         code=_read_text(folder / "code.py"),
-        feedback=_read_text(folder / "feedback.txt"),
+        feedback=_read_text(folder / "feedback.txt") or str(evaluation.get("feedback", "")),
         curves=_read_json(folder / "curves.json", {}),
         folder=folder,
+        cause=cause_of(evaluation),
+        answer=read_answer(folder),
+        screen_only=screen_only,
     )
+
+
+def read_candidate(folder: Path) -> Candidate | None:
+    """The candidate in ``folder``, or None while it has no ``evaluation.json`` yet."""
+    evaluation = _read_json(folder / "evaluation.json", None)
+    return None if evaluation is None else _candidate(folder, evaluation)
+
+
+def read_screen_only(folder: Path) -> Candidate | None:
+    """The candidate in ``folder`` as its screen left it, when it has a screen
+    (``screen.json``) and no full evaluation; else None."""
+    if (folder / "evaluation.json").is_file():
+        return None
+    screen = _read_json(folder / SCREEN, None)
+    return None if screen is None else _candidate(folder, screen, screen_only=True)
 
 
 def read_run(path: Path) -> Run:
@@ -127,6 +180,7 @@ def read_run(path: Path) -> Run:
         candidates=candidates,
         summary=_read_json(store.path / SUMMARY, None),
         provenance=store.provenance(),
+        screened=[c for c in map(read_screen_only, folders) if c is not None],
     )
     by_id = {candidate.id: candidate for candidate in candidates}
     for event in store.events():

@@ -3,11 +3,54 @@
 from __future__ import annotations
 
 import html
+from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import quote
 
 from sga_agent.task.report import Code, Image, Section, Table, Text
 
-__all__ = ["Code", "Image", "Section", "Table", "Text", "markdown", "to_html", "write"]
+__all__ = [
+    "Code", "Fold", "FoldedTable", "Image", "Section", "Table", "Text", "markdown", "to_html",
+    "write",
+]  # fmt: skip
+
+
+@dataclass
+class Fold:
+    """A titled text folded into a table row; ``file`` is where it can be read, relative to
+    the report's folder ("" for none)."""
+
+    title: str
+    text: str
+    file: str = ""
+
+
+@dataclass
+class FoldedTable(Table):
+    """A table whose rows each end in a cell of folded texts (``folds``, one list per row):
+    a ``<details>`` in HTML, links to their files in Markdown."""
+
+    folds: list[list[Fold]] = field(default_factory=list)
+    fold_header: str = "details"
+
+
+def _md_cell(text: str) -> str:
+    """``text`` as one cell of a Markdown table: one line, its pipes and tags inert."""
+    return text.replace("\n", " ").replace("|", "\\|").replace("<", "&lt;")
+
+
+def _md_folds(folds: list[Fold]) -> str:
+    return ", ".join(f"[{fold.title}]({quote(fold.file)})" if fold.file else fold.title
+                     for fold in folds)  # fmt: skip
+
+
+def _html_folds(folds: list[Fold]) -> str:
+    if not folds:
+        return ""
+    summary = html.escape(", ".join(fold.title for fold in folds))
+    texts = "".join(f"<p><b>{html.escape(fold.title)}</b></p><pre>{html.escape(fold.text)}</pre>"
+                    for fold in folds)  # fmt: skip
+    return f"<details><summary>{summary}</summary>{texts}</details>"
 
 
 def _runs(text: str) -> list[tuple[bool, list[str]]]:
@@ -40,6 +83,14 @@ def markdown(title: str, sections: list[Section]) -> str:
                 for is_list, run in _runs(block.text):
                     lines += [f"- {item}" for item in run] if is_list else run
                     lines.append("")
+            elif isinstance(block, FoldedTable):
+                header = [*block.header, block.fold_header]
+                lines.append("| " + " | ".join(header) + " |")
+                lines.append("|" + "---|" * len(header))
+                for row, folds in zip(block.rows, block.folds, strict=True):
+                    cells = [*map(_md_cell, row), _md_folds(folds)]
+                    lines.append("| " + " | ".join(cells) + " |")
+                lines.append("")
             elif isinstance(block, Table):
                 lines.append("| " + " | ".join(block.header) + " |")
                 lines.append("|" + "---|" * len(block.header))
@@ -58,7 +109,9 @@ def markdown(title: str, sections: list[Section]) -> str:
 STYLE = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
 pre{background:#f4f4f4;padding:1em;overflow-x:auto}img{max-width:100%}
-details{margin:1em 0}summary{cursor:pointer;font-size:1.2em}"""
+details{margin:1em 0}summary{cursor:pointer;font-size:1.2em}
+table.folded td{text-align:left;vertical-align:top}table.folded details{margin:0}
+table.folded summary{font-size:1em}table.folded pre{white-space:pre-wrap;max-width:60em}"""
 
 
 def _inline(text: str) -> str:
@@ -86,6 +139,15 @@ def to_html(title: str, sections: list[Section]) -> str:
                     else:
                         paragraph = "\n".join(run)
                         body.append(f"<p>{_inline(paragraph)}</p>")
+            elif isinstance(block, FoldedTable):
+                head = "".join(f"<th>{html.escape(cell)}</th>"
+                               for cell in [*block.header, block.fold_header])  # fmt: skip
+                rows = "".join(
+                    "<tr>" + "".join(f"<td>{html.escape(cell)}</td>" for cell in row)
+                    + f"<td>{_html_folds(folds)}</td></tr>"
+                    for row, folds in zip(block.rows, block.folds, strict=True)
+                )  # fmt: skip
+                body.append(f'<table class="folded"><tr>{head}</tr>{rows}</table>')
             elif isinstance(block, Table):
                 head = "".join(f"<th>{html.escape(cell)}</th>" for cell in block.header)
                 rows = "".join(

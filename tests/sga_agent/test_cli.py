@@ -218,8 +218,9 @@ def test_usage_errors_come_before_the_no_model_banner(tmp_path, args):
     assert not any(tmp_path.iterdir())
 
 
-def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):
-    """Resumed after its seed was evaluated, the search asks the model: nothing listens."""
+def test_a_resume_whose_server_is_down_stops_before_it_touches_the_run(tmp_path):
+    """Resumed after its seed was evaluated, the run asks the model for one word first:
+    nothing listens, so the command stops and the run is as it was."""
     config = SearchConfig.from_settings(
         task="granular", proposer="hosted_vllm/some-model", api_base=closed_port_url(),
         iterations=3, exploit=1, explore=1, workers=1,
@@ -227,15 +228,39 @@ def test_a_search_whose_server_is_down_stops_at_its_first_request(tmp_path):
     store = RunStore.create(tmp_path, config, {})
     seed = Evaluation(True, 1.0, "the seed's feedback")
     store.append({"type": "evaluation", "candidate": "00-seed", "evaluation": seed.to_dict()})
+    before = store.events()
     result = CliRunner().invoke(main, ["resume", str(store.path)])
     assert result.exit_code == 1, result.output
     error = next(line for line in result.output.splitlines() if line.startswith("Error:"))
     assert "connection refused" in error and "start the server or correct --api-base" in error
-    assert f"sga-agent resume {store.path}" in result.output
-    events = store.events()
-    assert [event["type"] for event in events].count("proposer_error") == 1
-    assert not any(event["type"] == "proposal" for event in events)
+    assert f"sga-agent resume {store.path}` again once the model answers" in result.output
+    assert store.events() == before
     assert not (store.path / "summary.json").exists()
+
+
+def test_a_search_whose_server_is_down_leaves_no_run_folder(tmp_path):
+    started = time.monotonic()
+    result = CliRunner().invoke(
+        main,
+        ["search", "--task", "elastic", "--model", "hosted_vllm/some-model",
+         "--api-base", closed_port_url(), "--out-dir", str(tmp_path)],
+    )  # fmt: skip
+    assert result.exit_code == 1, result.output
+    assert time.monotonic() - started < 15
+    assert "connection refused" in result.output and "no run was started" in result.output
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_money_budget_for_an_unpriced_model_needs_a_price(tmp_path):
+    args = ["search", "--task", "elastic", "--model", "openai/my-local-model", "--api-base",
+            closed_port_url(), "--max-usd", "0.0001", "--out-dir", str(tmp_path)]  # fmt: skip
+    result = CliRunner().invoke(main, args, env={"OPENAI_API_KEY": "sk-test"})
+    assert result.exit_code == 2, result.output
+    assert "--price" in result.output and "openai/my-local-model" in result.output
+    priced = CliRunner().invoke(main, [*args, "--price", "2.5,10"], env={"OPENAI_API_KEY": "x"})
+    assert priced.exit_code == 1 and "connection refused" in priced.output  # past the check
+    wrong = CliRunner().invoke(main, [*args, "--price", "2.5"], env={"OPENAI_API_KEY": "x"})
+    assert wrong.exit_code == 2 and "IN,OUT" in wrong.output
 
 
 def test_extract_solution_takes_the_last_python_block():

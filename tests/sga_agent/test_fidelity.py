@@ -22,7 +22,7 @@ from tests.sga_agent.test_search import LAW as SEARCH_LAW
 from tests.sga_agent.test_search import FakeTask, Scripted
 
 #: The search tests' law, with its screen loss written beside its loss.
-LAW = SEARCH_LAW.replace("# loss {value}", "# loss {value} screen {screen}")
+LAW = SEARCH_LAW.replace('loss {value}"', 'loss {value} screen {screen}"')
 
 
 def law(value: float, screen: float | None = None) -> str:

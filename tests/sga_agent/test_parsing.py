@@ -164,7 +164,7 @@ def test_hostile_snippets_are_rejected(code, expected):
     ("body", "head", "expected"),
     [
         ("return F", "import subprocess\n", "importing 'subprocess' is not allowed"),
-        ("return F", "import scipy\n", "only torch, math and numpy may be imported"),
+        ("return F", "import scipy\n", "only torch, math, numpy and standard helpers such as"),
         ("return F", "from torch import hub\n", "'torch.hub' is not allowed"),
         ("return F", "from torch.utils.cpp_extension import load_inline\n", "cpp_extension"),
         ("return F", "from torch import *\n", "import the names you use explicitly"),

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import json
 import re
 from concurrent.futures import Future
 
 import pytest
 from rich.console import Console
 
+from sga_agent.causes import cause_of
 from sga_agent.cli.progress import SearchProgress, print_result
-from sga_agent.config import UNTIL_BUDGET
-from sga_agent.events import CandidateScreened
+from sga_agent.config import UNTIL_BUDGET, SearchConfig
+from sga_agent.events import CandidateEvaluated, CandidateScreened
 from sga_agent.run_store import RunStore
-from sga_agent.search import Search, Totals
+from sga_agent.search import Search, SearchResult, Totals
 from sga_agent.task import Evaluation
 from tasks.constitutive.task import ElasticTask
 from tests.sga_agent.test_search import LAW, FakeTask, Scripted, config
@@ -141,3 +143,59 @@ def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
     screen = console(WIDTHS[-1])
     print_result(screen, store, result, False, ElasticTask(), cfg)
     assert "3 evaluations (3 ok) after 1 screens (1 unstable)" in screen.export_text()
+
+
+def failing_run(tmp_path) -> tuple[RunStore, SearchResult, SearchConfig]:
+    """A run of two answers without code, then (appended) two answers unstable at different
+    steps, a repeat, a timeout, an error and a screen that blew up."""
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    answers = ["no code in this answer", "no code here either"]
+    result = Search(cfg, FakeTask(), Scripted(answers), FittedScale(), store).run()
+    more = {
+        "02-explore-00": Evaluation.invalid("NaN stress at step 3", status="unstable"),
+        "02-explore-01": Evaluation.invalid("NaN stress at step 9", status="unstable"),
+        "02-exploit-00": Evaluation(True, 10.0, "ok", extras={"duplicate_of": "00-seed"}),
+        "02-explore-02": Evaluation.invalid("ran past 60 s", status="timeout"),
+        "02-explore-03": Evaluation.invalid("ValueError: bad shape", status="error"),
+    }
+    for candidate, evaluation in more.items():
+        store.append(CandidateEvaluated(candidate, evaluation.to_dict()))
+    store.append(CandidateScreened("03-explore-00", 0.2, more["02-explore-00"].to_dict()))
+    return store, result, cfg
+
+
+def test_the_final_screen_names_the_most_frequent_causes_of_failure(tmp_path):
+    store, result, cfg = failing_run(tmp_path)
+    no_code = cause_of(vars(store.recorded().evaluations["01-exploit-00"]))
+    assert no_code.startswith("invalid: ")
+    screen = console(WIDTHS[-1])
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    text = screen.export_text()
+    assert "failures:" in text.split("evaluations (")[1]  # after the counts by status
+    lines = text.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("failures:"))
+    assert " ".join(" ".join(lines[first:-1]).split()) == (  # wrapped, before the report line
+        f"failures: 8 of 8 answers: 3 unstable: NaN stress at step N; 2 {no_code}; "
+        "1 repeated an earlier law; 2 of other causes"
+    )
+
+
+def test_without_failures_no_causes_are_printed_and_json_lists_them(tmp_path, capsys):
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    answers = [LAW.format(value=10.0).replace("F * 10.0", "F + F * 10.0"),  # other forms
+               LAW.format(value=20.0).replace("F * 20.0", "F.T * 20.0")]  # fmt: skip
+    result = Search(cfg, FakeTask(), Scripted(answers), FittedScale(), store).run()
+    screen = console(WIDTHS[-1])
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    assert "3 evaluations (3 ok)" in screen.export_text()
+    assert "failures" not in screen.export_text()
+
+    store, result, cfg = failing_run(tmp_path / "failing")
+    capsys.readouterr()
+    print_result(console(80), store, result, True, ElasticTask(), cfg)
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["causes"][0] == ["unstable: NaN stress at step N", 3]
+    assert [count for _, count in summary["causes"]] == [3, 2, 1]
+    assert summary["run"] == str(store.path)
