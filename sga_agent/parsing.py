@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import ast
 import re
+import textwrap
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 
@@ -113,8 +114,8 @@ def parse_response(text: str) -> ParsedResponse:
     lines = text.splitlines()
     headings: list[tuple[int, str]] = []
     fences = list(_fences(lines))
-    blocks = tuple(
-        "\n".join(lines[start:stop]).strip("\n") + "\n"
+    blocks = tuple(  # a block indented in a list item loses its common indentation
+        textwrap.dedent("\n".join(lines[start:stop])).strip("\n") + "\n"
         for start, stop, tag in fences
         if tag in _CODE_TAGS
     )

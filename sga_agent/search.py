@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from sga_agent import events as ev
-from sga_agent.config import ConfigError, SearchConfig
+from sga_agent.config import ConfigError, LoopConfig, SearchConfig
 from sga_agent.failures import Outcome, failures_text
 from sga_agent.fingerprint import fingerprint, form_fingerprint
 from sga_agent.heap import Entry, SolutionHeap
@@ -34,7 +34,9 @@ from sga_agent.reading import read_answer
 from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
-__all__ = ["SEED", "Evaluator", "Search", "SearchResult", "Totals", "kth_best", "promoted"]
+__all__ = [
+    "SEED", "Evaluator", "Search", "SearchResult", "Totals", "kth_best", "promoted", "slots_of",
+]  # fmt: skip
 
 
 class Evaluator(Protocol):
@@ -186,16 +188,6 @@ class Search:
 
     # ------------------------------------------------------------------ proposals
 
-    def _slots(self, iteration: int) -> list[tuple[str, float]]:
-        cfg = self.loop
-        return [
-            (f"{iteration:02d}-exploit-{j:02d}", cfg.exploit_temperature)
-            for j in range(cfg.exploit)
-        ] + [
-            (f"{iteration:02d}-explore-{j:02d}", cfg.explore_temperature)
-            for j in range(cfg.explore)
-        ]
-
     def _shown(self) -> list[Entry]:
         """The solutions the next prompt shows: the best valid one of each form, K at most
         (the same law with other constants, or the same loss, counts once)."""
@@ -212,7 +204,7 @@ class Search:
         LLM-free one) breeds from the heap's top-K as it stands. Each answer records the ids
         of the solutions it was shown, or bred from, worst first (``parents``).
         """
-        slots = self._slots(iteration)
+        slots = slots_of(self.loop, iteration)
         missing: dict[float, list[str]] = {}
         for candidate, temperature in slots:
             if candidate not in self._answers:
@@ -529,6 +521,16 @@ class Search:
             "invalid": result.totals.invalid,
             "screened": result.totals.screened,
         }
+
+
+def slots_of(loop: LoopConfig, iteration: int) -> list[tuple[str, float]]:
+    """(candidate id, temperature) of ``iteration``'s answers: its exploit slots, then its
+    explore slots."""
+    return [
+        (f"{iteration:02d}-exploit-{j:02d}", loop.exploit_temperature) for j in range(loop.exploit)
+    ] + [
+        (f"{iteration:02d}-explore-{j:02d}", loop.explore_temperature) for j in range(loop.explore)
+    ]
 
 
 def promoted(screens: list[tuple[str, Evaluation]], share: float, bar: float) -> set[str]:

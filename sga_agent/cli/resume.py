@@ -9,11 +9,12 @@ import click
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.search import check_executor, execute, prepare
-from sga_agent.config import ConfigError
+from sga_agent.config import UNTIL_BUDGET, ConfigError, SearchConfig
 from sga_agent.events import RunResumed
 from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.run_store import RunFolderFull, RunLocked, RunStore, RunStoreError
+from sga_agent.search import slots_of
 
 
 @main.command()
@@ -56,7 +57,8 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
             raise click.UsageError(str(error)) from error
     check_executor(config)
     task, proposer = prepare(config, loaded)
-    check_model_answers(proposer, store)
+    if answers_wanted(config, store):
+        check_model_answers(proposer, store)
     if store.recorded().finished:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
     try:
@@ -64,6 +66,18 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
         execute(config, store, as_json, proposer, task)
     except RunFolderFull as error:  # the disk is full: the message says what to do
         raise click.ClickException(str(error)) from error
+
+
+def answers_wanted(config: SearchConfig, store: RunStore) -> bool:
+    """Whether the rest of the run asks the proposer for answers it has not recorded."""
+    if config.loop.iterations == UNTIL_BUDGET:
+        return True
+    recorded = store.recorded().proposals
+    return any(
+        candidate not in recorded
+        for iteration in range(1, config.loop.iterations + 1)
+        for candidate, _ in slots_of(config.loop, iteration)
+    )
 
 
 def check_model_answers(proposer: Proposer, store: RunStore) -> None:

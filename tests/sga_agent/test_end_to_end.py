@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.sga_agent.openai_server import ScriptedOpenAIServer
+from sga_agent.standin import ScriptedOpenAIServer
 
 KEY = "sk-test-not-a-real-key-0123456789"
 LAWS = Path(__file__).resolve().parents[2] / "examples" / "laws"
@@ -58,6 +58,7 @@ class Physics(nn.Module):
         return F
 """
 SCRIPT = [
+    "ready",  # the one-word request a search sends before it starts
     [answer(NEO_HOOKEAN), answer(SOFTER)],  # exploit, n=2
     ["I would rather not write code.", answer(RAISES), answer(NAN), answer(HOSTILE)],  # explore
 ]
@@ -101,9 +102,9 @@ def test_search_end_to_end(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     summary = json.loads(run.stdout.strip().splitlines()[-1])
     folder = Path(summary["run"])
-    assert [r["temperature"] for r in requests] == [0.5, 1.0]
-    assert [r.get("n") for r in requests] == [2, 4]
-    system, user = requests[0]["messages"]
+    assert [r["temperature"] for r in requests] == [0.0, 0.5, 1.0]
+    assert [r.get("n") for r in requests] == [None, 2, 4]
+    system, user = requests[1]["messages"]
     assert system["role"] == "system" and "### Code" in user["content"]
 
     statuses = {}

@@ -40,7 +40,7 @@ from sga_agent.proposers.redact import RedactingFilter, redact
 from sga_agent.registry import load_task
 from sga_agent.run_store import RunStore, RunStoreError
 from sga_agent.runner import make_proposer
-from tests.sga_agent.openai_server import Reply, ScriptedOpenAIServer
+from sga_agent.standin import Reply, ScriptedOpenAIServer
 
 KEY = "sk-test-not-a-real-key"
 MESSAGES = [
@@ -205,7 +205,7 @@ def test_a_timeout_is_retried_then_reported_with_the_fix(litellm: Any) -> None:
     mocked = Mocked(litellm, {"mock_timeout": True}, {"mock_timeout": True})
     sleeps: list[float] = []
     slow = proposer(completion=mocked, sleeps=sleeps, timeout_s=0.01, max_retries=1)
-    with pytest.raises(ProposerError, match="did not answer within timeout_s=0.01 s.*raise"):
+    with pytest.raises(ProposerError, match="did not answer within 0.01 s.*--request-timeout"):
         slow.sample(MESSAGES, 1.0, 1)
     assert len(mocked.calls) == 2 and len(sleeps) == 1
     assert mocked.calls[0]["timeout"] == 0.01
@@ -401,7 +401,7 @@ def test_a_slow_server_times_out(litellm: Any) -> None:
     with ScriptedOpenAIServer([Reply("late", delay_s=5.0)]) as server:
         backbone = proposer("openai/test-model", api_base=server.url, timeout_s=0.2, max_retries=0)
         start = time.monotonic()
-        with pytest.raises(ProposerError, match="did not answer within timeout_s=0.2 s"):
+        with pytest.raises(ProposerError, match="did not answer within 0.2 s"):
             backbone.sample(MESSAGES, 1.0, 1)
         assert time.monotonic() - start < 2.0
 
@@ -472,9 +472,7 @@ def test_the_replay_proposer_answers_from_the_recorded_run(tmp_path: Any) -> Non
     assert proposal == Proposal("a", "openai/gpt-4o", 0.5, 10, 5, 0.01)
     gap = ProposalRequest(["01-explore-00", "01-explore-01", "01-explore-02"], 1.0)
     assert [p.text for p in replay.propose(gap)] == ["b"]  # the slots after a gap get none
-    with pytest.raises(ProposerError, match="has no answer for 02-exploit-00") as error:
-        replay.propose(ProposalRequest(["02-exploit-00"], 0.5))
-    assert error.value.transient
+    assert replay.propose(ProposalRequest(["02-exploit-00"], 0.5)) == []  # never recorded
     with pytest.raises(RunStoreError, match="is not a run folder"):
         ReplayProposer(tmp_path / "nothing")
 
