@@ -19,7 +19,7 @@ from sga_agent.options import options_json
 from sga_agent.task import EvaluationSettings
 
 #: Characters of an error message kept in a one-line reason.
-MAX_MESSAGE_CHARS = 300
+MAX_MESSAGE_CHARS = 600
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,9 @@
 Three parts, as the method asks for: how the loss evolved during the inner optimization (and
 its best value), how each fitted parameter evolved (and its value at the best epoch), and where
 a few representative particles (corners of the body) went, simulated versus observed, at about
-ten moments of the trajectory.
+ten moments of the trajectory. Of those positions only the ones that disagree most are listed,
+with their errors; the others are summed up in one line (once a law fits, all of them agree
+and the table would only repeat the observation).
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ from tasks.constitutive.inner import InnerResult, InnerSettings
 
 CURVE_POINTS = 10  # values listed per curve
 TRAJECTORY_FRAMES = 10
-CORNERS = 4  # particles listed
+CORNERS = 4  # particles followed
+TRAJECTORY_ROWS = 8  # (particle, moment) rows listed at most; the others get one line
+PRINTED = 1e-3  # m: positions are printed to the mm, so a smaller error shows as none
 PARAMETERS_LISTED = 16  # scalar parameter values listed; a larger law gets a count
 
 
@@ -101,17 +105,60 @@ def _optimizer(settings: InnerSettings) -> str:
 def trajectory_text(
     predicted: np.ndarray, observed: np.ndarray, dt: float, particles: list[int]
 ) -> str:
-    """Positions of ``particles`` at ~10 moments, simulated next to observed."""
+    """Positions of ``particles`` at ~10 moments, simulated next to observed: the rows that
+    disagree most (see :func:`position_table`)."""
     steps = observed.shape[0] - 1
     frames = evenly_spaced(0, steps, TRAJECTORY_FRAMES + 1)[1:]
-    lines = ["Trajectories of corner particles (x, y, z in m; y points up), simulated vs observed:"]
-    for number, particle in enumerate(particles):
-        start = observed[0, particle]
-        lines.append(f"Particle {number} (starts at {_xyz(start)}):")
-        for frame in frames:
-            sim, obs = predicted[frame, particle], observed[frame, particle]
-            lines.append(f"  t = {frame * dt:.3f} s: simulated {_xyz(sim)}, observed {_xyz(obs)}")
+    return position_table(
+        "Trajectories of corner particles (x, y, z in m; y points up), simulated vs observed",
+        observed[0, particles],
+        [frame * dt for frame in frames],
+        predicted[np.ix_(frames, particles)].swapaxes(0, 1),
+        observed[np.ix_(frames, particles)].swapaxes(0, 1),
+    )
+
+
+def position_table(
+    title: str, starts: np.ndarray, times: list[float], simulated: np.ndarray,
+    observed: np.ndarray, rows: int = TRAJECTORY_ROWS,
+) -> str:  # fmt: skip
+    """``title`` and the rows (particle, moment) that say something: at most ``rows`` of those
+    whose simulated position is off the observed one by :data:`PRINTED` or more, the largest
+    errors, listed in particle and time order, then one line for the rest; one line when all
+    agree. ``simulated`` and ``observed`` are (particles, moments, 3), ``starts`` (particles, 3).
+    """
+    errors = np.linalg.norm(simulated - observed, axis=-1)
+    errors = np.where(np.isnan(errors), np.inf, errors)  # a non-finite position disagrees most
+    total = errors.size
+    worst = [int(k) for k in np.argsort(-errors, axis=None, kind="stable")[:rows]]
+    kept = sorted(k for k in worst if errors.flat[k] >= PRINTED)
+    shown = f"{len(starts)} particles at {len(times)} moments"
+    if not kept:
+        return (
+            f"{title} ({shown}): all {total} positions agree to within the printed precision "
+            f"({_mm(PRINTED)}); largest error {_mm(errors.max())}."
+        )
+    lines = [f"{title}, the {len(kept)} of {total} rows ({shown}) with the largest errors:"]
+    for number in dict.fromkeys(k // len(times) for k in kept):
+        lines.append(f"Particle {number} (starts at {_xyz(starts[number])}):")
+        for k in kept:
+            if k // len(times) == number:
+                moment = k % len(times)
+                lines.append(
+                    f"  t = {times[moment]:.3f} s: simulated {_xyz(simulated[number, moment])}, "
+                    f"observed {_xyz(observed[number, moment])}, error {_mm(errors.flat[k])}"
+                )
+    if total > len(kept):
+        rest = np.delete(errors.reshape(-1), kept)
+        summary = f"agree to within {_mm(rest.max())} (their largest error)"
+        if not np.isfinite(rest.max()):
+            summary = "hold non-finite positions too"
+        lines.append(f"The other {rest.size} rows {summary}.")
     return "\n".join(lines)
+
+
+def _mm(metres: float) -> str:
+    return f"{metres * 1e3:.1f} mm" if np.isfinite(metres) else "a non-finite distance"
 
 
 def _xyz(point: np.ndarray) -> str:

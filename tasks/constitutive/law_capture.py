@@ -7,7 +7,9 @@ symbolic, so the graph holds for any number of particles) and on its parameters 
 of a :mod:`~tasks.constitutive.law_graph` document (this module imports neither it nor
 Taichi). Python control flow is executed during the trace, so loops unroll and branches on
 Python values are taken once; a branch on a tensor's value cannot be traced and is refused with
-a hint (use ``torch.where``).
+a hint (use ``torch.where``). Every refusal of the law's code names its line, the cause and the
+fix (:mod:`~tasks.constitutive.law_errors`): an error the law also raises on real tensors is
+told as those raise it, with real sizes rather than the trace's symbolic ones.
 
 Nothing here is trusted by whoever reads the result: the fit checks the document again.
 """
@@ -15,6 +17,7 @@ Nothing here is trusted by whoever reads the result: the fit checks the document
 from __future__ import annotations
 
 import operator
+import re
 from typing import Any
 
 import torch
@@ -23,20 +26,18 @@ from torch.fx.experimental.proxy_tensor import make_fx
 
 from tasks.constitutive import law_ops
 from tasks.constitutive.law_code import LawCodeError, describe_error, load_law
+from tasks.constitutive.law_errors import explain, explain_at, quote_line, stack_line
 
 #: Particles in the traced batch (any size > 1 gives the same symbolic graph), and in the
 #: batch the recorded graph is checked on besides.
 TRACE_BATCH, CHECK_BATCH = 5, 7
 #: Operators of the Python ``operator`` module, by function, for the graph's names.
 _OPERATORS = {function: name for name, function in law_ops.PYTHON_OPS.items()}
-_DATA_DEPENDENT = (
-    "unallocated storage",
-    "data-dependent",
-    "Data dependent",
-    "DataDependent",
-    "GuardOnDataDependentSymNode",
-    "item()",
-    "aten._local_scalar_dense",
+#: Errors that only a trace raises: a tensor's value read out, or a NumPy conversion.
+_TRACE_ONLY = re.compile(
+    r"data-dependent|Data dependent|DataDependent|unallocated storage|item\(\)"
+    r"|_local_scalar_dense|numpy|__array__",
+    re.IGNORECASE,
 )
 
 
@@ -97,12 +98,13 @@ def capture_law(code: str) -> dict[str, Any]:
                 torch.func.functionalize(forward),
                 tracing_mode="symbolic",
                 _allow_non_fake_inputs=True,  # tensors held by the module become constants
+                record_stack_traces=True,  # each node's line of the law, for the refusals
             )(F, *[value for _, value in named])
     except LawCodeError:
         raise
     except Exception as error:
-        raise LawCaptureError(_explain(error)) from None
-    document = serialize(traced, named)  # refuses operations that are not allowed first
+        raise LawCaptureError(_explain(error, code, law, F)) from None
+    document = serialize(traced, named, code)  # refuses operations that are not allowed first
     _check_faithful(traced, law, F, [value for _, value in named])
     return document
 
@@ -138,8 +140,11 @@ def _check_faithful(
             )
 
 
-def serialize(traced: fx.GraphModule, parameters: list[tuple[str, torch.Tensor]]) -> dict:
-    """The graph document of a traced ``forward(F, *parameters)``."""
+def serialize(
+    traced: fx.GraphModule, parameters: list[tuple[str, torch.Tensor]], code: str = ""
+) -> dict:
+    """The graph document of a traced ``forward(F, *parameters)``; a refusal quotes the line
+    of the law's ``code`` that made the refused node, where the trace recorded it."""
     placeholders = [node for node in traced.graph.nodes if node.op == "placeholder"]
     refs: dict[fx.Node, dict[str, int]] = {placeholders[0]: {"input": 0}}
     refs.update({node: {"param": k} for k, node in enumerate(placeholders[1:])})
@@ -175,10 +180,16 @@ def serialize(traced: fx.GraphModule, parameters: list[tuple[str, torch.Tensor]]
             constants.append(_tensor_document(tensor))
         elif node.op == "call_function":
             op = _op_name(node.target)
+            line = stack_line(node.meta.get("stack_trace"))
             if op == "aten._local_scalar_dense.default":  # .item(), float(), int() of a tensor
-                raise LawCaptureError(_explain(RuntimeError("data-dependent")))
+                reading = RuntimeError(f"{op} (data-dependent)")
+                raise LawCaptureError(explain_at(reading, line, code, raised=False))
             if not law_ops.is_allowed(op):
-                raise LawCaptureError(f"the law calls {op}, which is not allowed: {law_ops.HINT}")
+                where = quote_line(code, line)
+                raise LawCaptureError(
+                    f"the law calls {op}, which is not allowed: {law_ops.HINT}"
+                    + (f". At {where}" if where else "")
+                )
             refs[node] = {"node": len(nodes)}
             kwargs = {key: encode(value) for key, value in node.kwargs.items()}
             nodes.append({"op": op, "args": encode(node.args), "kwargs": kwargs})
@@ -225,17 +236,14 @@ def _sample_deformation_gradients(batch: int = TRACE_BATCH) -> torch.Tensor:
     return torch.eye(3, dtype=torch.float64) + 0.05 * noise
 
 
-def _explain(error: Exception) -> str:
-    text = str(error)
-    if any(marker in text or marker in type(error).__name__ for marker in _DATA_DEPENDENT):
-        return (
-            "the law branches on or reads out a tensor's value (an if on a tensor, .item(), "
-            "float() or bool() of a tensor), which cannot be captured: use "
-            "torch.where(condition, a, b) instead of an if, and keep every value a tensor"
-        )
-    if "numpy" in text.lower() or "__array__" in text:
-        return (
-            "the law converts a tensor to NumPy, which cannot be captured: use torch "
-            "operations on tensors only"
-        )
-    return f"the law could not be captured: {describe_error(error)}"
+def _explain(error: Exception, code: str, law: torch.nn.Module, F: torch.Tensor) -> str:
+    """Why the trace failed. An error the law also raises when run on real tensors is that
+    one, whose message names real sizes (the trace's names symbolic ones, like s96); an error
+    of the trace only is a tensor's value read out (or a NumPy conversion)."""
+    if not _TRACE_ONLY.search(f"{type(error).__name__}: {error}"):
+        try:
+            with torch.no_grad():
+                law(F)
+        except Exception as eager:
+            error = eager
+    return f"the law could not be captured: {explain(error, code)}"

@@ -17,6 +17,9 @@ from collections.abc import Iterator
 from sga_agent.task.code import CodeRejected, Problem, dotted_name, import_aliases, parse_python
 
 CLASS_NAME = "Physics"
+#: The import that binds each name a law's base class is commonly written with.
+_BASE_IMPORTS = {"nn": "import torch.nn as nn", "torch": "import torch",
+                 "Module": "from torch.nn import Module"}  # fmt: skip
 
 
 def check_law(code: str) -> None:
@@ -47,7 +50,7 @@ def _problems(tree: ast.Module, aliases: dict[str, str]) -> Iterator[Problem]:
     if lineage is None:
         bases = ", ".join(ast.unparse(base) for base in found[0].bases) or "nothing"
         text = f"class {CLASS_NAME} must derive from nn.Module (torch.nn.Module); it derives"
-        yield found[0].lineno, f"{text} from {bases}"
+        yield found[0].lineno, f"{text} from {bases}{_missing_imports(found[0], aliases)}"
         return
     methods = {
         node.name: node
@@ -69,6 +72,17 @@ def _problems(tree: ast.Module, aliases: dict[str, str]) -> Iterator[Problem]:
         text = f"{CLASS_NAME}.forward must take exactly one required argument besides self,"
         text += f" the input F; it requires {', '.join(required) or 'no argument'}"
         yield methods["forward"].lineno, text
+
+
+def _missing_imports(cls: ast.ClassDef, aliases: dict[str, str]) -> str:
+    """What to import for the template's base class, when the code uses it unimported."""
+    roots = []
+    for base in cls.bases:
+        while isinstance(base, ast.Attribute):
+            base = base.value
+        if isinstance(base, ast.Name) and base.id in _BASE_IMPORTS and base.id not in aliases:
+            roots.append(base.id)
+    return "".join(f"; {root} is not imported: add `{_BASE_IMPORTS[root]}`" for root in roots)
 
 
 def _required(args: ast.arguments) -> list[str]:

@@ -124,24 +124,21 @@ def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
 
 def trajectory_text(predicted: np.ndarray, data: ObservedData) -> str:
     """Four observed particles at the corners of the body, simulated next to observed, at up
-    to ten of the observed frames."""
+    to ten of the observed frames: the rows that disagree most (see
+    :func:`~tasks.constitutive.feedback.position_table`)."""
     start = data.scene.positions[data.particles]
     picks = evenly_spaced(0, len(data.frame_steps) - 1, feedback.TRAJECTORY_FRAMES)
-    lines = ["Trajectories of observed particles near the body's corners (x, y, z in m; y "
-             "points up), simulated vs observed:"]  # fmt: skip
-    for number, column in enumerate(dict.fromkeys(feedback.corner_particles(start))):
-        particle = data.particles[column]
-        lines.append(f"Particle {number} (starts at {_xyz(start[column])}):")
-        for pick in picks:
-            step = data.frame_steps[pick]
-            lines.append(f"  t = {step * data.scene.dt:.3f} s: simulated "
-                         f"{_xyz(predicted[step, particle])}, observed "
-                         f"{_xyz(data.positions[pick, column])}")  # fmt: skip
-    return "\n".join(lines)
-
-
-def _xyz(point: np.ndarray) -> str:
-    return "(" + ", ".join(f"{c:.3f}" for c in point) + ")"
+    columns = list(dict.fromkeys(feedback.corner_particles(start)))
+    steps = [int(data.frame_steps[pick]) for pick in picks]
+    particles = [data.particles[column] for column in columns]
+    return feedback.position_table(
+        "Trajectories of observed particles near the body's corners (x, y, z in m; y points "
+        "up), simulated vs observed",
+        start[columns],
+        [step * data.scene.dt for step in steps],
+        predicted[np.ix_(steps, particles)].swapaxes(0, 1),
+        data.positions[np.ix_(picks, columns)].swapaxes(0, 1),
+    )
 
 
 def assess(

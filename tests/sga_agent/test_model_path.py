@@ -21,7 +21,7 @@ from tests.sga_agent.test_end_to_end import environment
 #: sent apart), a missing import, the class in the second of three blocks, an exact repeat,
 #: torch.trace on a batch (the model's own error), and a cut-off answer asked again.
 CHOSEN = (
-    "01-gpt-4o-clean.md", "43-deepseek-r1-reasoning-content.md", "10-gpt-4o-missing-import.md",
+    "01-gpt-4o-clean.md", "07-deepseek-r1-clean.md", "11-mistral-missing-import.md",
     "16-claude-class-not-last.md", "39-gpt-4o-exact-repeat.md", "23-llama-3-torch-trace.md",
     "29-gpt-4o-truncated.md",
 )  # fmt: skip

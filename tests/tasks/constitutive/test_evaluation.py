@@ -136,7 +136,8 @@ REFUSED = {
     "shape mismatch": (
         "import torch.nn as nn\nclass Physics(nn.Module):\n"
         "    def forward(self, F):\n        return F @ F[:, :2]\n",
-        "the law could not be captured: RuntimeError",
+        "the law could not be captured: the shapes of two tensors do not fit together. "
+        "At line 4 (`return F @ F[:, :2]`). Fix: F is (B, 3, 3)",
     ),
 }
 
