@@ -116,6 +116,8 @@ def corpus_part(task: str, out: Path) -> dict[str, Any]:
     for answer in answers:
         found = next((c for c in candidates if c["text"] == answer.text), None)
         status = found["status"] if found else "not asked"
+        if found is None and answer.finish_reason == "length" and _asked_again(folder):
+            status = "cut off, asked again"
         evaluated = found is not None and (
             status in EVALUATED or bool(found["evaluation"].get("extras", {}).get("duplicate_of"))
         )
@@ -146,6 +148,14 @@ def corpus_part(task: str, out: Path) -> dict[str, Any]:
     }
 
 
+def _asked_again(folder: Path) -> bool:
+    """Whether some answer of the run replaced one cut off at the token limit."""
+    return any(
+        json.loads(path.read_text()).get("truncated_before", 0)
+        for path in folder.glob("candidates/*/proposal.json")
+    )
+
+
 def _candidates(folder: Path) -> list[dict[str, Any]]:
     found = []
     for path in sorted((folder / "candidates").iterdir()):
@@ -169,13 +179,13 @@ def _told_in_next_prompt(folder: Path, candidates: list[dict[str, Any]]) -> dict
     for path in sorted(folder.glob("candidates/02-*/messages.json")):
         prompt = json.loads(path.read_text())[-1]["content"]
         part = prompt.split("## What went wrong in the last iteration", 1)[1:] or [""]
-        sections.append(_plain(part[0].split("## Format requirements", 1)[0]))
+        sections.append(part[0].split("## Format requirements", 1)[0])
     untold = []
     for candidate in failed:
         reason = _plain(str(candidate["evaluation"].get("reason", "")))[:40]
         repeat = bool(candidate["evaluation"].get("valid"))
         for section in sections:
-            if candidate["id"] not in section or not (repeat or reason in section):
+            if candidate["id"] not in section or not (repeat or reason in _plain(section)):
                 untold.append(candidate["id"])
                 break
     return {"failed": [c["id"] for c in failed], "untold": untold, "prompts": len(sections)}
@@ -301,7 +311,7 @@ def _print_corpus(part: dict[str, Any]) -> None:
           f"whose own code fails at run time); {part['seconds']:.0f} s")  # fmt: skip
     for row in part["rows"]:
         mark = "evaluated" if row["evaluated"] else row["status"]
-        print(f"  {row['file']:<40} {row['style']:<12} {mark:<10} {row['cause'][:70]}")
+        print(f"  {row['file']:<40} {row['style']:<12} {mark:<20} {row['cause'][:70]}")
     print("  causes of failure in iteration 1: " + "; ".join(
         f"{count} {cause}" for cause, count in part["causes"]))  # fmt: skip
     print(f"  failed or repeated in iteration 1: {len(part['failed'])}; missing from an "

@@ -39,8 +39,9 @@ class Outcome:
 
 def failures_text(outcomes: Sequence[Outcome], earlier_losses: Mapping[str, float]) -> str:
     """The section's body for the last iteration's ``outcomes``; ``earlier_losses`` maps the
-    earlier candidates to their losses (to tell a repeat which law it repeated, and find a
-    scored answer that reached exactly an earlier loss). Empty when nothing went wrong."""
+    scored candidates to their losses (to tell a repeat the loss of the law it repeated, and
+    find a scored answer that reached exactly the loss of one before it). Empty when nothing
+    went wrong."""
     grouped: dict[str, list[Outcome]] = {}
     repeats: list[str] = []
     for outcome in outcomes:

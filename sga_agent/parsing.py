@@ -33,7 +33,14 @@ from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 
 from sga_agent.task import Task, as_task
-from sga_agent.task.code import CodeRejected, Problem, dotted_name, import_aliases, parse_python
+from sga_agent.task.code import (
+    CodeRejected,
+    Problem,
+    bound_names,
+    dotted_name,
+    import_aliases,
+    parse_python,
+)
 
 #: Standard-library modules of no harm that models import out of habit (type hints, small
 #: helpers), allowed beside a kind's own; the capture process has them loaded already.
@@ -236,7 +243,7 @@ class _Checker(ast.NodeVisitor):
         self.allowed = allowed
         self.problems: list[Problem] = []
         self.aliases = import_aliases(tree)
-        self.bound = _bound_names(tree)
+        self.bound = bound_names(tree)
 
     def reject(self, node: ast.AST, text: str) -> None:
         self.problems.append((getattr(node, "lineno", 0), text))
@@ -352,18 +359,3 @@ def _source(node: ast.expr) -> str:
     """The code of ``node`` as written, or ``.attr`` when that is long."""
     text = ast.unparse(node)
     return text if len(text) <= 60 or not isinstance(node, ast.Attribute) else "." + node.attr
-
-
-def _bound_names(tree: ast.Module) -> set[str]:
-    """Every name the code binds: assignments, arguments, definitions, imports."""
-    bound = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Name) and not isinstance(node.ctx, ast.Load):
-            bound.add(node.id)
-        elif isinstance(node, ast.arg):
-            bound.add(node.arg)
-        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-            bound.add(node.name)
-        elif isinstance(node, ast.alias):
-            bound.add((node.asname or node.name).split(".")[0])
-    return bound

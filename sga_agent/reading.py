@@ -11,7 +11,11 @@ last one), and for code tasks (``kind == "equation"``):
 - adds the standard imports the code uses without importing (``torch``, ``nn``, ``math``,
   ``np``, the ``typing`` names of its hints);
 - writes an integer starting value of a parameter as a float (``E: float = 200000`` becomes
-  ``200000.0``; ``torch.tensor(1)`` inside ``nn.Parameter`` becomes ``torch.tensor(1.0)``).
+  ``200000.0``; ``torch.tensor(1)`` inside ``nn.Parameter`` becomes ``torch.tensor(1.0)``);
+- reads ``torch.trace(X)``, which works on one matrix, as what the author of a law over a
+  batch F (B, 3, 3) meant by it: the trace of each matrix, kept as (B, 1, 1);
+- drops casts to a precision (``.to(torch.float32)``, ``.double()``): the simulation chooses
+  the precision, and a cast tensor meets F's in the next product.
 
 Each change is listed in :attr:`Reading.fixes`, in words the model is shown. Nothing here runs
 the code: it is read through its syntax tree, and edited as text so that its comments stay.
@@ -26,6 +30,7 @@ import warnings
 from dataclasses import dataclass, field
 
 from sga_agent.parsing import ParsedResponse, parse_response
+from sga_agent.task.code import bound_names
 
 #: Imports added when the code uses the name without binding it (equation tasks).
 STANDARD_IMPORTS: dict[str, str] = {
@@ -37,6 +42,13 @@ STANDARD_IMPORTS: dict[str, str] = {
 }
 #: ``typing`` names models use in hints without importing them.
 TYPING_NAMES = frozenset({"Any", "Dict", "List", "Optional", "Sequence", "Tuple", "Union"})
+#: The trace of each matrix of a batch (B, 3, 3), as (B, 1, 1).
+BATCHED_TRACE = "torch.diagonal({}, dim1=-2, dim2=-1).sum(-1)[..., None, None]"
+#: The floating types a precision cast names.
+_FLOAT_TYPES = frozenset({
+    "torch.float32", "torch.float64", "torch.float", "torch.double", "torch.half",
+    "torch.float16", "torch.bfloat16",
+})  # fmt: skip
 #: Annotations under which an integer default is meant as an integer.
 _INTEGER_HINTS = frozenset({"int", "bool"})
 _THINK = re.compile(r"<think(?:ing)?>(.*?)(?:</think(?:ing)?>|\Z)", re.S | re.I)
@@ -122,11 +134,12 @@ def template_names(template: str) -> set[str]:
 
 
 def fix_code(code: str, names: set[str]) -> tuple[str, list[str]]:
-    """``code`` with its usage example dropped, missing standard imports added and integer
-    starting values written as floats; the fixes, one sentence each. Code that does not parse
-    is returned unchanged (the checks name its syntax error)."""
+    """``code`` with its usage example dropped, integer starting values written as floats,
+    ``torch.trace`` of a batch read as each matrix's trace, precision casts dropped and missing
+    standard imports added; the fixes, one sentence each. Code that does not parse is returned
+    unchanged (the checks name its syntax error)."""
     fixes: list[str] = []
-    for step in (_drop_usage, _float_defaults, _add_imports):
+    for step in (_drop_usage, _float_defaults, _batched_traces, _no_precision_casts, _add_imports):
         tree = _parse(code)
         if tree is None:
             break
@@ -180,7 +193,7 @@ def _drop_usage(code: str, tree: ast.Module, names: set[str]) -> tuple[str, str]
     for node in tree.body:
         if isinstance(node, definitions):
             loads = {n.id for n in ast.walk(node) if isinstance(n, ast.Name) and _reads(n)}
-            read |= loads - _bound(node)
+            read |= loads - bound_names(node)
     dropped = []
     for node in tree.body[defining[-1] + 1 :]:
         if isinstance(node, (ast.Import, ast.ImportFrom, *definitions)) or _is_docstring(node):
@@ -223,16 +236,76 @@ def _float_defaults(code: str, tree: ast.Module, names: set[str]) -> tuple[str, 
                     edits += [arg for arg in inner.args[:1] if _is_integer(arg)]
     if not edits:
         return code, ""
-    lines = code.splitlines(keepends=True)
-    for constant in sorted(edits, key=lambda c: (c.lineno, c.col_offset), reverse=True):
-        row = lines[constant.lineno - 1]
-        start, end = constant.col_offset, constant.end_col_offset
-        lines[constant.lineno - 1] = row[:start] + f"{row[start:end]}.0" + row[end:]
+    fixed = _replaced(code, [(c, f"{c.value}.0") for c in edits])
     shown = sorted({str(c.value) for c in edits}, key=len)[:3]
-    return "".join(lines), (
+    return fixed, (
         f"integer starting values ({', '.join(shown)}) were written as floats: a fitted "
         "parameter must be a float (write 1.0, not 1)"
     )
+
+
+def _batched_traces(code: str, tree: ast.Module, names: set[str]) -> tuple[str, str]:
+    """``torch.trace(X)``, meant per particle on a batch (B, 3, 3), as the trace of each
+    matrix, kept broadcastable as (B, 1, 1) the way the scalar it was taken for is used."""
+    calls = [node for node in ast.walk(tree) if _is_trace(node)]
+    if not calls:
+        return code, ""
+    line = calls[0].lineno
+    for _ in range(len(calls)):
+        call = next((node for node in ast.walk(tree) if _is_trace(node)), None)
+        if call is None:
+            break
+        text = BATCHED_TRACE.format(_source(code, call.args[0]))  # type: ignore[attr-defined]
+        code = _replaced(code, [(call, text)])
+        tree = _parse(code) or tree
+    return code, (
+        f"torch.trace works on one matrix, so torch.trace(...) of a batch (line {line}) was "
+        f"read as the trace of each matrix, {BATCHED_TRACE.format('A')}"
+    )
+
+
+def _is_trace(node: ast.AST) -> bool:
+    return (
+        isinstance(node, ast.Call)
+        and ast.unparse(node.func) == "torch.trace"
+        and len(node.args) == 1
+        and not node.keywords
+    )
+
+
+def _no_precision_casts(code: str, tree: ast.Module, names: set[str]) -> tuple[str, str]:
+    """Casts to a floating precision dropped, one at a time (they may nest): the simulation
+    chooses the precision, and a tensor cast to another meets F's in the next product."""
+    casts = [node for node in ast.walk(tree) if _is_precision_cast(node)]
+    if not casts:
+        return code, ""
+    first = f"`{_source(code, casts[0])}` (line {casts[0].lineno})"
+    for _ in range(len(casts)):
+        cast = next((node for node in ast.walk(tree) if _is_precision_cast(node)), None)
+        if cast is None:
+            break
+        code = _replaced(code, [(cast, _operand(code, cast.func.value))])  # type: ignore[attr-defined]
+        tree = _parse(code) or tree
+    return code, (
+        f"precision casts such as {first} were dropped: the simulation chooses the "
+        "precision (make tensors with dtype=F.dtype)"
+    )
+
+
+def _operand(code: str, node: ast.expr) -> str:
+    """``node``'s text, in parentheses unless it binds tighter than any operator."""
+    text = _source(code, node)
+    atoms = (ast.Name, ast.Attribute, ast.Call, ast.Subscript, ast.Constant)
+    return text if isinstance(node, atoms) else f"({text})"
+
+
+def _is_precision_cast(node: ast.AST) -> bool:
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
+        return False
+    method, args = node.func.attr, [*node.args, *(k.value for k in node.keywords)]
+    if method in ("float", "double") and not args:
+        return True
+    return method == "to" and len(args) == 1 and ast.unparse(args[0]) in _FLOAT_TYPES
 
 
 def _integer_defaults(args: ast.arguments) -> list[ast.Constant]:
@@ -269,7 +342,7 @@ def _is_tensor_call(node: ast.AST) -> bool:
 
 def _add_imports(code: str, tree: ast.Module, names: set[str]) -> tuple[str, str]:
     """Standard imports the code uses but lacks, added at its top."""
-    bound = _bound(tree)
+    bound = bound_names(tree)
     loaded = {
         n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)
     }
@@ -289,22 +362,32 @@ def _add_imports(code: str, tree: ast.Module, names: set[str]) -> tuple[str, str
     return fixed, f"the code used names it never imported; added {listed}"
 
 
+def _source(code: str, node: ast.AST) -> str:
+    return ast.get_source_segment(code, node) or ast.unparse(node)
+
+
+def _replaced(code: str, edits: list[tuple[ast.AST, str]]) -> str:
+    """``code`` with each node's text replaced (nodes that do not overlap)."""
+    lines = code.splitlines(keepends=True)
+    starts = [0]
+    for line in lines:
+        starts.append(starts[-1] + len(line))
+
+    def offset(line: int, byte_column: int) -> int:  # ast columns count UTF-8 bytes
+        return starts[line - 1] + len(lines[line - 1].encode()[:byte_column].decode())
+
+    spans = sorted(
+        ((offset(n.lineno, n.col_offset), offset(n.end_lineno, n.end_col_offset), text)  # type: ignore[attr-defined]
+         for n, text in edits),
+        reverse=True,
+    )  # fmt: skip
+    for start, end, text in spans:
+        code = code[:start] + text + code[end:]
+    return code
+
+
 def _reads(node: ast.Name) -> bool:
     return isinstance(node.ctx, ast.Load)
-
-
-def _bound(tree: ast.AST) -> set[str]:
-    bound = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Name) and not isinstance(node.ctx, ast.Load):
-            bound.add(node.id)
-        elif isinstance(node, ast.arg):
-            bound.add(node.arg)
-        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-            bound.add(node.name)
-        elif isinstance(node, ast.alias):
-            bound.add(node.asname or node.name.split(".")[0])
-    return bound
 
 
 def _import_position(tree: ast.Module) -> int:

@@ -284,11 +284,7 @@ class Search:
             code = self._codes.get(candidate, self._answers[candidate].get("text", ""))
             fixes = record.extras.get("read_as") or []
             outcomes.append(Outcome(candidate, code, record.to_dict(), fixes))
-        earlier = {
-            entry.candidate: entry.loss
-            for entry in self.heap.entries
-            if entry.valid and entry.candidate < prefix
-        }
+        earlier = {entry.candidate: entry.loss for entry in self.heap.entries if entry.valid}
         return failures_text(outcomes, earlier)
 
     def _extract(self, candidate: str, proposal: dict[str, Any]) -> tuple[str, Evaluation | None]:

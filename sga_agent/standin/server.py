@@ -238,7 +238,7 @@ def _handler_for(server: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
             length = int(self.headers.get("Content-Length", 0))
             body = json.loads(self.rfile.read(length) or b"{}")
             if self.path.rstrip("/") not in CHAT_PATHS:
-                self._send_json(404, {"error": {"message": f"no route {self.path}", "type": "404"}})
+                self._send_json(404, _error(Reply.error(404, f"no route {self.path}")))
                 return
             reply = server._take(body)
             if reply.kind == "hang":

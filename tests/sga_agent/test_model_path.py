@@ -19,10 +19,10 @@ from tests.sga_agent.test_end_to_end import environment
 
 #: Answers of iteration 1, by corpus file: a clean one, a reasoning model's (its reasoning
 #: sent apart), a missing import, the class in the second of three blocks, an exact repeat,
-#: torch.trace on a batch (the model's own error), and a cut-off answer asked again.
+#: an `if` on a tensor (the model's own error), and a cut-off answer asked again.
 CHOSEN = (
     "01-gpt-4o-clean.md", "07-deepseek-r1-clean.md", "11-mistral-missing-import.md",
-    "16-claude-class-not-last.md", "39-gpt-4o-exact-repeat.md", "23-llama-3-torch-trace.md",
+    "16-claude-class-not-last.md", "39-gpt-4o-exact-repeat.md", "28-gpt-4o-tensor-branch.md",
     "29-gpt-4o-truncated.md",
 )  # fmt: skip
 
@@ -96,8 +96,9 @@ def test_a_search_with_a_model_that_falls_silent_stops_then_resumes(tmp_path):
         assert len(ok) >= 5  # clean, reasoning, missing import, class not last, cut-off re-asked
         duplicates = [e for e in iteration_1.values() if e["extras"].get("duplicate_of")]
         assert len(duplicates) == 1  # the exact repeat, evaluated once
-        (trace,) = [e for e in iteration_1.values() if "trace" in e["reason"]]
-        assert "diagonal" in trace["reason"]  # the fix is named
+        (branch,) = [e for e in iteration_1.values() if e["status"] == "invalid"]
+        assert "At line 42 (`if J < 1:`)" in branch["reason"]  # the line, the cause, the fix
+        assert "torch.where" in branch["reason"]
         fixed = [e["extras"]["read_as"] for e in iteration_1.values() if "read_as" in e["extras"]]
         assert any("import torch.nn as nn" in " ".join(fixes) for fixes in fixed)
         assert any("code blocks" in " ".join(fixes) for fixes in fixed)
@@ -118,7 +119,7 @@ def test_a_search_with_a_model_that_falls_silent_stops_then_resumes(tmp_path):
         assert summary["causes"]  # the top causes of failure, for machines
         prompt = json.loads((candidates / "02-exploit-00" / "messages.json").read_text())
         failures = prompt[-1]["content"].split("## What went wrong in the last iteration")[1]
-        assert "torch.diagonal" in failures  # the trace failure and its fix reach the model
+        assert "if J < 1:" in failures and "torch.where" in failures  # it reaches the model
         assert "the same code as" in failures  # and so does the repeat
 
     report = subprocess.run(

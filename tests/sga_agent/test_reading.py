@@ -123,3 +123,30 @@ def test_entity_code_is_only_chosen_never_edited():
 @pytest.mark.parametrize("broken", ["class Physics(nn.Module:\n    pass\n", "def f(:\n"])
 def test_code_that_does_not_parse_is_left_for_the_checks(broken):
     assert read_answer(answer(broken), "equation", TEMPLATE).code == broken
+
+
+def test_a_trace_of_a_batch_is_read_per_matrix_and_precision_casts_are_dropped():
+    law = TEMPLATE.replace(
+        "        return F\n",
+        "        tr = torch.trace(F @ F.transpose(-2, -1))  # the first invariant, é\n"
+        "        s = (F * 2.0).to(torch.float32).double()\n"
+        "        return tr * s.float() + F.to(dtype=torch.float64) + F.to(F.device)\n",
+    )
+    reading = read_answer(answer(law), "equation", TEMPLATE)
+    assert reading.code is not None
+    assert (
+        "tr = torch.diagonal(F @ F.transpose(-2, -1), dim1=-2, dim2=-1).sum(-1)[..., None, None]"
+        in reading.code
+    )
+    assert "s = (F * 2.0)\n" in reading.code
+    assert "return tr * s + F + F.to(F.device)" in reading.code
+    fixes = " ".join(reading.fixes)
+    assert "torch.trace works on one matrix" in fixes and "precision casts" in fixes
+    import torch
+
+    namespace: dict = {}
+    exec(reading.code, namespace)  # a trusted test of the rewritten code, not a candidate's
+    F = torch.eye(3, dtype=torch.float64).expand(4, 3, 3) * 2.0
+    out = namespace["Physics"]()(F)
+    assert out.shape == (4, 3, 3) and out.dtype == torch.float64
+    assert torch.allclose(out[0], 12.0 * 4.0 * torch.eye(3, dtype=torch.float64) + 2 * F[0])
