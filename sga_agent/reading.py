@@ -52,6 +52,8 @@ _FLOAT_TYPES = frozenset({
 #: Annotations under which an integer default is meant as an integer.
 _INTEGER_HINTS = frozenset({"int", "bool"})
 _THINK = re.compile(r"<think(?:ing)?>(.*?)(?:</think(?:ing)?>|\Z)", re.S | re.I)
+_OPENING_THINK = re.compile(r"<think(?:ing)?>", re.I)
+_CLOSING_THINK = re.compile(r"</think(?:ing)?>", re.I)
 
 
 @dataclass(frozen=True)
@@ -93,8 +95,7 @@ def read_answer(text: str, kind: str, template: str, finish_reason: str = "") ->
     finish_reason : str
         The provider's finish reason; "length" with an unclosed code block is a cut-off answer.
     """
-    reasoning = "\n\n".join(part.strip() for part in _THINK.findall(text)).strip()
-    visible = _THINK.sub("", text)
+    reasoning, visible = split_reasoning(text)
     parsed = parse_response(visible)
     if not parsed.blocks:
         if finish_reason == "length":
@@ -116,6 +117,16 @@ def read_answer(text: str, kind: str, template: str, finish_reason: str = "") ->
         code, more = fix_code(code, names)
         fixes += more
     return Reading(code, fixes=fixes, parsed=parsed, reasoning=reasoning)
+
+
+def split_reasoning(text: str) -> tuple[str, str]:
+    """An answer's ``<think>`` part and the rest. A closing tag with no opening one (the
+    chat template of QwQ and some DeepSeek-R1 servers opens it) closes what came before."""
+    closing = _CLOSING_THINK.search(text)
+    if closing and not _OPENING_THINK.search(text[: closing.start()]):
+        text = "<think>" + text
+    reasoning = "\n\n".join(part.strip() for part in _THINK.findall(text)).strip()
+    return reasoning, _THINK.sub("", text)
 
 
 def cut_off_problem() -> str:

@@ -106,6 +106,12 @@ def test_no_code_is_no_code_and_the_think_part_is_kept_apart():
     assert reading.reasoning == "Maybe a cone."
 
 
+def test_a_think_part_whose_opening_tag_the_server_sent_is_kept_apart():
+    text = "Maybe a cone.\n```python\nclass Physics: pass\n```\n</think>\n" + answer(TEMPLATE)
+    reading = read_answer(text, "equation", TEMPLATE)
+    assert reading.code == TEMPLATE and reading.reasoning.startswith("Maybe a cone.")
+
+
 def test_a_fenced_block_inside_the_think_part_is_not_the_answer():
     text = "<think>\n```python\nclass Physics: pass\n```\n</think>\n" + answer(TEMPLATE)
     reading = read_answer(text, "equation", TEMPLATE)
