@@ -189,9 +189,15 @@ class Search:
     # ------------------------------------------------------------------ proposals
 
     def _shown(self) -> list[Entry]:
-        """The solutions the next prompt shows: the best valid one of each form, K at most
-        (the same law with other constants, or the same loss, counts once)."""
-        return self.heap.distinct_top(self.loop.top_k, form_fingerprint)
+        """The solutions the next prompt shows: the best valid one of each law, K at most
+        (the same code, or the same loss, counts once; for an equation task, whose numbers
+        are starting values of a fit, so does the same code with other numbers)."""
+        return self.heap.distinct_top(self.loop.top_k, self._form)
+
+    def _form(self, code: str) -> str:
+        """What makes two solutions one: their form for an equation task (its numbers are
+        where the fit starts), their whole code for an entity task (its numbers are it)."""
+        return form_fingerprint(code) if self.task.kind == "equation" else fingerprint(code)
 
     def _answers_for(
         self, iteration: int, shown: list[Entry]
@@ -442,7 +448,10 @@ class Search:
 
     def _note_form(self, candidate: str, code: str) -> None:
         """Remember the first candidate of ``code``'s form; a later one of the same form (the
-        same law with other constants) is marked ``same_form_as`` it when stored."""
+        same law with other constants) is marked ``same_form_as`` it when stored. Only for an
+        equation task: an entity's numbers are the entity."""
+        if self.task.kind != "equation":
+            return
         first = self._forms.setdefault(form_fingerprint(code), candidate)
         if first != candidate:
             self._same_form[candidate] = first

@@ -296,3 +296,18 @@ def test_a_bad_time_budget_is_a_usage_error_naming_the_form(tmp_path, text):
     assert "--time-budget" in result.output
     assert "duration" in result.output
     assert not any(tmp_path.iterdir())
+
+
+def test_a_resume_asks_the_model_first_only_when_it_will_ask_it_again(tmp_path):
+    from sga_agent.cli.resume import answers_wanted
+
+    config = SearchConfig.from_settings(
+        task="granular", proposer="openai/gpt-4o", iterations=1, exploit=1, explore=1
+    )
+    store = RunStore.create(tmp_path, config, {})
+    assert answers_wanted(config, store)
+    for candidate in ("01-exploit-00", "01-explore-00"):
+        store.append({"type": "proposal", "candidate": candidate, "proposal": {"text": "x"}})
+    assert not answers_wanted(config, store)  # every answer is recorded: no request is sent
+    assert answers_wanted(config.replace(iterations=2), store)
+    assert answers_wanted(config.replace(max_seconds=60.0, iterations=1_000_000), store)

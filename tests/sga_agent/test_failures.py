@@ -142,3 +142,25 @@ def test_a_run_whose_answers_repeat_shows_distinct_laws_and_tells_the_repeats(tm
     assert parents["parents"] == ["00-seed", "01-explore-00"]
     evaluation = json.loads((store.path / "candidates/01-explore-00/evaluation.json").read_text())
     assert evaluation["extras"]["same_form_as"] == "01-exploit-00"
+
+
+class FakeEntityTask(FakeTask):
+    """An entity task: its solutions are literal numbers, each a solution of its own."""
+
+    kind = "entity"
+
+    def seed_solution(self) -> str:
+        return "guess = 100.0  # loss 100.0\n"
+
+
+def test_an_entity_s_other_numbers_are_another_solution_not_a_repeat(tmp_path):
+    answers = [f"```python\nguess = {v}  # loss {v}\n```" for v in (3.0, 2.0, 4.0, 1.0, 5.0, 6.0)]
+    cfg = config(iterations=2, top_k=3, exploit=1, explore=2)
+    store = RunStore.create(tmp_path, cfg, {})
+    Search(cfg, FakeEntityTask(), Scripted(answers), LossInCode(), store).run()
+    prompt = json.loads((store.path / "candidates/02-exploit-00/messages.json").read_text())
+    user = prompt[-1]["content"]
+    assert "What went wrong" not in user  # nothing repeated, nothing failed
+    assert all(f"guess = {v}" in user for v in (2.0, 3.0, 4.0))  # three solutions shown
+    for path in store.path.glob("candidates/*/evaluation.json"):
+        assert "same_form_as" not in json.loads(path.read_text())["extras"]
