@@ -92,21 +92,33 @@ def capture_law(code: str) -> dict[str, Any]:
         return torch.func.functional_call(law, dict(zip(names, values, strict=True)), (F,))
 
     F = _sample_deformation_gradients()
+    values = [value for _, value in named]
     try:
-        with torch.no_grad():
-            traced = make_fx(
-                torch.func.functionalize(forward),
-                tracing_mode="symbolic",
-                _allow_non_fake_inputs=True,  # tensors held by the module become constants
-                record_stack_traces=True,  # each node's line of the law, for the refusals
-            )(F, *[value for _, value in named])
+        traced = _trace(forward, F, values, lines=False)
     except LawCodeError:
         raise
     except Exception as error:
         raise LawCaptureError(_explain(error, code, law, F)) from None
-    document = serialize(traced, named, code)  # refuses operations that are not allowed first
-    _check_faithful(traced, law, F, [value for _, value in named])
+    try:
+        document = serialize(traced, named, code)  # refuses operations not allowed first
+    except LawCaptureError:  # traced again with each node's line, to name it in the refusal
+        document = serialize(_trace(forward, F, values, lines=True), named, code)
+    _check_faithful(traced, law, F, values)
     return document
+
+
+def _trace(
+    forward: Any, F: torch.Tensor, values: list[torch.Tensor], lines: bool
+) -> fx.GraphModule:
+    """``forward`` traced on symbolic fake tensors; with ``lines``, each node records the
+    stack it was made in (a tenth of a second more: only a refusal needs it)."""
+    with torch.no_grad():
+        return make_fx(
+            torch.func.functionalize(forward),
+            tracing_mode="symbolic",
+            _allow_non_fake_inputs=True,  # tensors held by the module become constants
+            record_stack_traces=lines,
+        )(F, *values)
 
 
 def _check_faithful(
