@@ -10,7 +10,6 @@ from typing import Any
 import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.syntax import Syntax
 from rich.table import Table
 
 from sga_agent import events as ev
@@ -143,7 +142,7 @@ def print_result(
         if best.parameters:
             console.print("its code, with the fitted constants written in:")
         code = solution_with_parameters(task, best.code, best.parameters)
-        console.print(Syntax(code, "python", theme="ansi_dark", word_wrap=True))
+        console.out(code, highlight=False)  # as written: never wrapped, so it can be copied
     else:
         console.print("no valid solution was found")
     console.print(_counts(recorded.values(), run.screens.values(), result, uses_a_model(config)))

@@ -128,9 +128,26 @@ def test_the_final_screen_compares_with_the_seed_and_shows_the_fitted_law(tmp_pa
     assert "3 evaluations (2 ok, 1 invalid)\n" in text  # no screens in a full-fidelity run
     assert "tokens" not in text
     assert f"report: sga-agent report {store.path}\n" in text  # one line, whatever the width
-    for line in text.splitlines():
+    code = text.split("its code, with the fitted constants written in:\n")[1].split("\n3 eval")[0]
+    compile(code, "<screen>", "exec")  # the code as written, not wrapped at the width
+    for line in text.replace(code, "").splitlines():
         if not line.startswith(("report:", "run folder:")):
             assert len(line) <= width, line
+
+
+def test_the_law_on_the_final_screen_compiles_however_narrow_the_screen(tmp_path):
+    """Piped or narrow, the printed law is the law: long lines are not wrapped."""
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=0), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    long_line = "        return F * 10.0  # " + "a comment that runs far past forty columns " * 3
+    law = LAW.format(value=10.0).replace("        return F * 10.0", long_line)
+    result = Search(cfg, FakeTask(), Scripted([law]), FittedScale(), store).run()
+    screen = console(40)
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    text = screen.export_text()
+    code = text.split("written in:\n")[1].split("\n2 evaluations")[0]
+    assert long_line.rstrip() in code
+    compile(code, "<screen>", "exec")
 
 
 def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
