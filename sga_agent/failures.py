@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from sga_agent.causes import REPEATED, cause_of
-from sga_agent.heap import SAME_LOSS
+from sga_agent.heap import same_loss
 
 MAX_CAUSES = 6
 MAX_REASON_CHARS = 420
@@ -85,8 +85,11 @@ def _repeat(outcome: Outcome, earlier_losses: Mapping[str, float]) -> str:
     loss = _loss(outcome.evaluation)
     if outcome.evaluation.get("valid") and math.isfinite(loss):
         for candidate, earlier in earlier_losses.items():
-            same = math.isfinite(earlier) and abs(loss - earlier) <= SAME_LOSS * abs(earlier)
-            if same and candidate < outcome.candidate:
+            if (
+                math.isfinite(earlier)
+                and same_loss(loss, earlier)
+                and candidate < outcome.candidate
+            ):
                 return (
                     f"{outcome.candidate} reached exactly the loss of {candidate} ({loss:.6g}): "
                     "the same law written another way"

@@ -81,7 +81,7 @@ class SolutionHeap:
             if not (entry.valid and math.isfinite(entry.loss)):
                 continue
             key = form(entry.code)
-            if key in forms or any(_same_loss(entry.loss, other.loss) for other in chosen):
+            if key in forms or any(same_loss(entry.loss, other.loss) for other in chosen):
                 continue
             forms.add(key)
             chosen.append(entry)
@@ -97,5 +97,6 @@ class SolutionHeap:
         return len(self.entries)
 
 
-def _same_loss(a: float, b: float) -> bool:
+def same_loss(a: float, b: float) -> bool:
+    """Whether ``a`` and ``b`` are one loss (within :data:`SAME_LOSS` of the larger)."""
     return abs(a - b) <= SAME_LOSS * max(abs(a), abs(b))

@@ -150,16 +150,15 @@ def fit_to_budget(
     many were left out; every section stays. A prompt that still does not fit at the shortest
     is returned as it is (its task text and code alone exceed the budget).
     """
-    ordered = worst_first(history)
+    original = worst_first(history)
+    ordered = list(original)
     messages = build_messages(kind, parts, ordered, failures)
     tokens = count(messages)
     if budget is None or tokens <= budget:
         return messages, tokens
     for lines in FEEDBACK_LINES:
-        for index in range(len(ordered)):
-            ordered[index] = dataclasses.replace(
-                ordered[index], feedback=shortened(ordered[index].feedback, lines)
-            )
+        for index, shown in enumerate(original):
+            ordered[index] = dataclasses.replace(shown, feedback=shortened(shown.feedback, lines))
             messages = build_messages(kind, parts, ordered, failures)
             tokens = count(messages)
             if tokens <= budget:

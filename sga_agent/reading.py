@@ -140,8 +140,7 @@ def cut_off_problem() -> str:
 def template_names(template: str) -> set[str]:
     """The names a code template defines at its top level (classes, functions, assigned
     names)."""
-    tree = _parse(template)
-    return _defined_in(tree) if tree is not None else set()
+    return _defined(template)
 
 
 def fix_code(code: str, names: set[str]) -> tuple[str, list[str]]:

@@ -27,10 +27,10 @@ from sga_agent.config import ConfigError, LoopConfig, SearchConfig
 from sga_agent.failures import Outcome, failures_text
 from sga_agent.fingerprint import fingerprint, form_fingerprint
 from sga_agent.heap import Entry, SolutionHeap
-from sga_agent.parsing import check_candidate
+from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.prompting import Shown, count_tokens, fit_to_budget
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
-from sga_agent.reading import read_answer
+from sga_agent.reading import read_answer, split_reasoning
 from sga_agent.run_store import SEED, RunStore
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
 
@@ -254,9 +254,9 @@ class Search:
     def _save_answer(self, candidate: str, proposal: Proposal) -> None:
         """The answer's analysis, plan and reasoning (the provider's and its ``<think>``
         part), each as a file of the candidate's folder."""
-        reading = read_answer(proposal.text, self.task.kind, self._template)
-        sections = reading.parsed.sections if reading.parsed is not None else {}
-        reasoning = "\n\n".join(part for part in (proposal.reasoning, reading.reasoning) if part)
+        thought, visible = split_reasoning(proposal.text)
+        sections = parse_response(visible).sections
+        reasoning = "\n\n".join(part for part in (proposal.reasoning, thought) if part)
         self.store.save_answer_parts(
             candidate,
             {"analysis": sections.get("analysis", ""), "plan": sections.get("plan", ""),

@@ -22,6 +22,8 @@ from types import ModuleType
 import torch
 import torch.nn.functional
 
+from sga_agent.task.code import bound_names
+
 #: The file name a law's code is compiled under, so that its frames can be found.
 LAW_FILENAME = "<law>"
 #: Longest quote of the law's line and of torch's message, in characters.
@@ -99,23 +101,8 @@ def _undefined_name(match: re.Match[str], code: str) -> str:
             f"{name} is an argument of __init__, which forward cannot see; keep it in __init__ "
             f"(self.{name} = nn.Parameter(torch.tensor({name}))) and write self.{name}"
         )
-    close = _did_you_mean(name, sorted(_defined_names(tree) - {name}), "")
+    close = _did_you_mean(name, sorted(bound_names(tree) - {name}), "")
     return close or f"define {name} before this line (a parameter is self.{name})"
-
-
-def _defined_names(tree: ast.Module) -> set[str]:
-    """Names the code assigns, imports or takes as arguments."""
-    names: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
-            names.add(node.id)
-        elif isinstance(node, ast.arg):
-            names.add(node.arg)
-        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-            names.add(node.name)
-        elif isinstance(node, ast.alias):
-            names.add(node.asname or node.name.split(".")[0])
-    return names
 
 
 def _integer_defaults(match: re.Match[str], code: str) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 from sga_agent.causes import REPEATED, cause_of, top_causes
 from sga_agent.failures import MAX_CAUSES, Outcome, failures_text
@@ -109,6 +110,11 @@ def test_the_prompt_is_shortened_worst_feedback_first_to_fit_its_budget():
     for section in ("## Task", "## Earlier solutions", "### Code template", "### Analysis"):
         assert section in user
     assert shortened("a\nb\nc", 2) == "a\nb\n(1 more lines of this feedback left out)"
+    # shortened again, a feedback counts what it left out of the whole, not of the last cut
+    tight, _ = fit_to_budget("equation", parts, history, "", full_count - 1500, count)
+    left = [int(n) for n in re.findall(r"\((\d+) more lines", tight[-1]["content"])]
+    assert any(n > 60 - FEEDBACK_LINES[0] for n in left)  # the second cut at least
+    assert set(left) <= {60 - lines for lines in FEEDBACK_LINES}
     assert FEEDBACK_LINES[-1] >= 2
 
 
