@@ -1,9 +1,10 @@
 """Reading a model's answer, and checking its code before anything runs it.
 
 :func:`parse_response` splits an answer into its sections ("### Analysis", "### Step-by-Step
-Plan", "### Code") and takes the last python code block. :func:`check_code` inspects that code
-through its syntax tree only (nothing is executed) and raises :class:`CodeRejected`, whose
-message is feedback for the next prompt, when it breaks a generic safety rule:
+Plan", "### Code") and its python code blocks (:mod:`sga_agent.reading` chooses the
+solution's). :func:`check_code` inspects that code through its syntax tree only (nothing is
+executed) and raises :class:`CodeRejected`, whose message is feedback for the next prompt,
+when it breaks a generic safety rule:
 
 - imports only from the allowed top-level modules (torch, math and numpy for equation tasks,
   with the harmless standard modules of :data:`HARMLESS_IMPORTS` such as ``typing``; none

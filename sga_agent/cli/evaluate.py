@@ -5,7 +5,6 @@ The same path as a search's candidate: the static checks, the confined capture, 
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
@@ -17,18 +16,22 @@ from rich.text import Text
 from sga_agent import registry
 from sga_agent.cli import main
 from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
-from sga_agent.parsing import check_candidate
+from sga_agent.parsing import check_candidate, parse_response
+from sga_agent.reading import read_answer
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox, threads_per_worker
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Task
 
-_FENCED_PYTHON = re.compile(r"```python[^\n]*\n(.*?)```", re.DOTALL)
 _DEFAULTS = SandboxLimits()
 
 
-def extract_solution(text: str) -> str:
-    """The last ```python fenced block of ``text`` (a model's answer), else the whole text."""
-    blocks = _FENCED_PYTHON.findall(text)
-    return blocks[-1] if blocks else text
+def solution_in(text: str, task: Task) -> tuple[str | None, str, list[str]]:
+    """The solution in a file's ``text``, its reason if it has none, and the slips fixed: a
+    model's answer (fenced code blocks) is read as the search reads one
+    (:func:`sga_agent.reading.read_answer`), a bare solution is taken as it is."""
+    if not parse_response(text).blocks:
+        return text, "", []
+    reading = read_answer(text, task.kind, task.prompt_parts().template)
+    return reading.code, reading.problem, reading.fixes
 
 
 @main.command()
@@ -97,7 +100,8 @@ def evaluate(
 
     The code passes the search's static checks, runs only in the confined capture process, and
     is fitted by a trusted process from what the capture recorded. FILE is a solution (a law's
-    .py file, a molecule block) or a model's answer, whose last ```python block is then used.
+    .py file, a molecule block) or a model's answer, read as the search reads one (the block
+    that defines the solution, its slips fixed and printed as "read as: ...").
     Prints the fitted parameters, the loss and the feedback; an invalid solution prints its
     reason to stderr and exits with status 1.
     """
@@ -110,8 +114,12 @@ def evaluate(
     typed = typed_task_options(task, options)
     limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb, threads=threads_per_worker(1))
     settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=typed)
-    solution = extract_solution(text)
+    solution, problem, fixes = solution_in(text, task)
+    for fix in fixes:
+        click.echo(f"read as: {fix}", err=True)
     try:
+        if solution is None:
+            raise CodeRejected(problem)
         check_candidate(solution, task)
     except CodeRejected as error:
         evaluation = Evaluation.invalid(f"the code breaks the rules: {error}")

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from sga_agent import registry
 from sga_agent.cli import main
-from sga_agent.cli.evaluate import extract_solution
+from sga_agent.cli.evaluate import solution_in
 from sga_agent.cli.options import Duration
 from sga_agent.config import SearchConfig
 from sga_agent.run_store import RunStore
@@ -263,9 +263,14 @@ def test_a_money_budget_for_an_unpriced_model_needs_a_price(tmp_path):
     assert wrong.exit_code == 2 and "IN,OUT" in wrong.output
 
 
-def test_extract_solution_takes_the_last_python_block():
-    assert extract_solution("a\n```python\nx = 1\n```\n```python\nx = 2\n```\n") == "x = 2\n"
-    assert extract_solution("x = 3\n") == "x = 3\n"
+def test_a_file_s_solution_is_read_as_the_search_reads_an_answer():
+    task = registry.load_task("elastic")
+    last = solution_in("a\n```python\nx = 1\n```\n```python\nx = 2\n```\n", task)
+    assert last == ("x = 2\n", "", [])  # neither defines the template's names: the last
+    assert solution_in("x = 3\n", task) == ("x = 3\n", "", [])  # a bare solution as it is
+    law = law_solution("SCALE = 2.0")
+    code, problem, fixes = solution_in(f"```python\n{law}```\n```python\nPhysics()\n```", task)
+    assert code == law and not problem and "block 1" in fixes[0]
 
 
 def test_search_help_writes_every_default_one_way():
