@@ -11,10 +11,11 @@ function in a grandchild process, ``G``, under every mechanism the host offers:
 - **Network**: a new network namespace (only a loopback interface, down); Landlock (ABI >= 4)
   also denies TCP bind and connect. A new IPC namespace hides the host's System V objects.
 - **Filesystem**: a private mount namespace in which ``/tmp``, ``/run``, ``/var/tmp`` and
-  ``/dev/shm`` are fresh empty file systems (no host socket or shared-memory file is reachable)
-  and every mount is read-only; ``/proc`` shows only the namespace's processes. Landlock denies
-  every write and every read outside the Python installation, its packages and the system
-  libraries (``/etc``, home directories and caches are unreadable).
+  ``/dev/shm`` are fresh empty file systems (no host socket or shared-memory file is reachable;
+  the Python environment's own folders inside them, a virtual environment under /tmp, are
+  bound back in) and every mount is read-only; ``/proc`` shows only the namespace's processes.
+  Landlock denies every write and every read outside the Python installation, its packages and
+  the system libraries (``/etc``, home directories and caches are unreadable).
 - **Resources**: address space (``RLIMIT_AS``, which counts shared mappings), process count
   (``RLIMIT_NPROC``), CPU time, file size, no core dumps.
 
@@ -67,6 +68,7 @@ _AT_FDCWD = -100
 _AT_RECURSIVE = 0x8000
 _MOUNT_ATTR_RDONLY = 0x1
 _MS_NOSUID, _MS_NODEV, _MS_NOEXEC = 0x2, 0x4, 0x8
+_MS_BIND = 0x1000
 _MS_REC = 0x4000
 _MS_PRIVATE = 1 << 18
 
@@ -338,7 +340,7 @@ def confine(
     """Confine the calling process (process 1 of the namespaces ``_unshare`` made)."""
     readable = readable_paths()  # before the user changes: it may import modules
     in_namespaces = not namespaces.startswith("none:")
-    mounts = _private_mounts(libc) if in_namespaces else f"none: {_why(namespaces)}"
+    mounts = _private_mounts(libc, readable) if in_namespaces else f"none: {_why(namespaces)}"
     was_root = os.getuid() == 0 and namespaces == "namespaces"
     limits = _limit(memory_mb, cpu_time_s, file_size_mb, PROCESS_LIMIT if was_root else None)
     user = _become_nobody(libc) if was_root else _drop_capabilities(libc)
@@ -361,8 +363,12 @@ def confine(
     )
 
 
-def _private_mounts(libc: ctypes.CDLL) -> str:
-    """Fresh /tmp, /run, /var/tmp, /dev/shm and /proc, then everything read-only."""
+def _private_mounts(libc: ctypes.CDLL, readable: Iterable[Path]) -> str:
+    """Fresh /tmp, /run, /var/tmp, /dev/shm and /proc, then everything read-only.
+
+    The readable paths that lie inside a private folder (a virtual environment or a checkout
+    under /tmp) are bound back into it, so the confined process sees the same Python.
+    """
 
     def mount(source: str, target: str, kind: str | None, flags: int, data: str | None) -> None:
         if libc.mount(os.fsencode(source), os.fsencode(target),
@@ -370,12 +376,18 @@ def _private_mounts(libc: ctypes.CDLL) -> str:
                       data.encode() if data else None) != 0:  # fmt: skip
             raise OSError(ctypes.get_errno(), "mount failed", target)
 
+    inside = paths_inside(readable, PRIVATE_FOLDERS)
     try:
         _mount_setattr(libc, "/", _AT_RECURSIVE, _MountAttr(propagation=_MS_PRIVATE))
+        handles = {path: os.open(path, os.O_PATH) for path in inside}  # before they are hidden
         for folder in PRIVATE_FOLDERS:
             if os.path.isdir(folder):
                 mount("none", folder, "tmpfs", _MS_NOSUID | _MS_NODEV | _MS_NOEXEC,
                       "size=1m,mode=755")  # fmt: skip
+        for path, handle in handles.items():
+            _make_mount_point(path, handle)
+            mount(f"/proc/self/fd/{handle}", str(path), None, _MS_BIND | _MS_REC, None)
+            os.close(handle)
         try:
             mount("proc", "/proc", "proc", _MS_NOSUID | _MS_NODEV | _MS_NOEXEC, None)
             proc = "/proc of its own PID namespace"
@@ -385,6 +397,22 @@ def _private_mounts(libc: ctypes.CDLL) -> str:
     except OSError as error:
         return f"none: private mounts failed ({error.strerror}: {error.filename})"
     return f"read-only mounts, empty private {', '.join(PRIVATE_FOLDERS)}; {proc}"
+
+
+def paths_inside(paths: Iterable[Path], folders: Iterable[str]) -> list[Path]:
+    """The ``paths`` strictly inside one of ``folders``, none inside another one listed."""
+    roots = [Path(folder) for folder in folders]
+    inside = sorted(path for path in paths if any(root in path.parents for root in roots))
+    return [path for path in inside if not any(other in path.parents for other in inside)]
+
+
+def _make_mount_point(path: Path, handle: int) -> None:
+    """An empty directory (or file) at ``path`` on the fresh file system, to mount onto."""
+    if stat.S_ISDIR(os.fstat(handle).st_mode):
+        path.mkdir(parents=True, exist_ok=True)
+    else:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.touch()
 
 
 def _limit(memory_mb: int, cpu_time_s: int, file_size_mb: int, processes: int | None) -> str:

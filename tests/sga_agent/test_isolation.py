@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from sga_agent.isolation import Isolation, detect_isolation, readable_paths
+from sga_agent.isolation import Isolation, detect_isolation, paths_inside, readable_paths
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox
 from sga_agent.task import EvaluationSettings
 
@@ -152,6 +152,36 @@ def test_secrets_cannot_be_read(tmp_path):
     assert "SGA-ISOLATION-SECRET" not in json.dumps(evaluation.to_dict())
 
 
+def test_a_python_environment_under_tmp_stays_importable():
+    """A package first imported inside the capture, from a folder under /tmp (a venv there),
+    is found; the rest of /tmp stays hidden."""
+    require("filesystem", "private")
+    folder = Path(tempfile.mkdtemp(dir="/tmp"))
+    try:
+        folder.chmod(0o755)
+        environment = folder / "site-packages"
+        package = environment / f"lazy_{uuid.uuid4().hex}"
+        package.mkdir(parents=True)
+        (package / "__init__.py").write_text("VALUE = 'imported lazily'\n")
+        (folder / "secret.txt").write_text("SGA-ISOLATION-SECRET")
+        candidate = (
+            f"import importlib\nmodule = importlib.import_module({package.name!r})\n"
+            "report = {'value': module.VALUE}\n"
+            f"try:\n    report['secret'] = open({str(folder / 'secret.txt')!r}).read()\n"
+            "except OSError as error:\n    report['secret'] = error.errno\n"
+        )
+        evaluation = evaluate_in_sandbox(
+            DOUBLE, candidate, EvaluationSettings(), SandboxLimits(timeout_s=60),
+            extra_python_path=[REPO_ROOT, environment],
+        )  # fmt: skip
+        assert evaluation.valid, evaluation.reason
+        report = evaluation.extras["report"]
+        assert report["value"] == "imported lazily"
+        assert report["secret"] in (errno.EACCES, errno.EPERM, errno.ENOENT)
+    finally:
+        shutil.rmtree(folder)
+
+
 def test_signals_to_other_processes_are_refused():
     require("processes", "signals")
     sleeper = subprocess.Popen(["sleep", "60"])
@@ -204,3 +234,8 @@ def test_an_unprivileged_user_gets_namespaces_in_a_user_namespace(tmp_path):
     report = json.loads(completed.stdout.splitlines()[-1])
     assert report["network"].startswith("network namespace"), report
     assert "not root" in report["processes"]
+
+
+def test_only_the_outermost_paths_inside_a_private_folder_are_bound():
+    paths = [Path("/tmp/x/.venv/lib"), Path("/tmp/x/.venv"), Path("/usr/lib"), Path("/tmp")]
+    assert paths_inside(paths, ("/tmp", "/run")) == [Path("/tmp/x/.venv")]
