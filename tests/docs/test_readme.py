@@ -1,6 +1,7 @@
 """The README: short, with the install and test commands CI runs, links that resolve, and a
 taichi_mpm example that runs as a script and prints its results."""
 
+import ast
 import re
 import subprocess
 import sys
@@ -49,12 +50,28 @@ def test_the_main_commands_output_is_shown():
     assert "run folder: runs/granular-" in block and "report: sga-agent report" in block
 
 
+def test_the_readme_python_examples_import_only_what_they_use():
+    for block in re.findall(r"```python\n(.*?)```", text(), re.S):
+        tree = ast.parse(block)
+        imported = {
+            (alias.asname or alias.name).split(".")[0]
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Import | ast.ImportFrom)
+            for alias in node.names
+        }
+        used = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
+        assert imported <= used, f"imported, never used: {sorted(imported - used)}"
+
+
 @pytest.mark.slow
 def test_the_readme_python_example_runs_as_a_script_and_prints():
     """In its own process: it picks float32."""
     blocks = re.findall(r"```python\n(.*?)```", text(), re.S)
     assert blocks, "README.md has no python example"
-    check = "\nassert np.isfinite(loss) and set(grads.material) == {'E', 'nu', 'yield_stress'}\n"
+    check = (
+        "\nimport numpy as np\n"
+        "assert np.isfinite(loss) and set(grads.material) == {'E', 'nu', 'yield_stress'}\n"
+    )
     result = subprocess.run(
         [sys.executable, "-c", blocks[0] + check], capture_output=True, text=True, timeout=900
     )
@@ -62,3 +79,42 @@ def test_the_readme_python_example_runs_as_a_script_and_prints():
     printed = dict(re.findall(r"^dloss/d(\w+) = (\S+)$", result.stdout, re.MULTILINE))
     assert set(printed) == {"E", "nu", "yield_stress"}, result.stdout
     assert re.search(r"^loss \d\.\d+e[-+]\d+$", result.stdout, re.MULTILINE), result.stdout
+
+
+#: The lines that open each part of the main command's end screen, in the README's order.
+SCREEN_PARTS = ("run folder:", "top ", "best:", "ground truth:", "verdict:",
+                "free run of the best on the training scene", "free run of the best on the "
+                "held-out scene", "its code, with the fitted constants written in:",
+                "evaluations", "failures:", "report: sga-agent report")  # fmt: skip
+
+
+def parts(screen: str) -> list[str]:
+    """The parts of an end screen that are there, in the order they come."""
+    found = []
+    for line in screen.splitlines():
+        words = re.sub(r"^\d+ ", "", line.strip())
+        found += [part for part in SCREEN_PARTS if words.startswith(part) and part not in found]
+    return found
+
+
+def best_loss(screen: str) -> float:
+    return float(re.search(r"^best: \S+, loss (\S+),", screen, re.MULTILINE).group(1))
+
+
+@pytest.mark.slow
+def test_the_main_command_piped_prints_the_readme_screen_with_a_law_that_compiles(tmp_path):
+    """``sga-agent search --task granular > out.txt``: the law in the file is Python, and the
+    screen has the README's parts and its best loss (within 2x: another CPU may differ)."""
+    piped = tmp_path / "out.txt"
+    with piped.open("w") as stdout:
+        done = subprocess.run(
+            [sys.executable, "-m", "sga_agent", "search", "--task", "granular"], cwd=tmp_path,
+            stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=3600,
+        )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    screen = piped.read_text(encoding="utf-8")
+    code = re.search(r"written in:\n(.*?)\n\d+ evaluations? ", screen, re.S).group(1)
+    compile(code, "out.txt", "exec")
+    readme = re.search(r"```text\n(.*?)```", text(), re.S).group(1)
+    assert parts(screen) == parts(readme) == list(SCREEN_PARTS)
+    assert 0.5 < best_loss(screen) / best_loss(readme) < 2, (screen, readme)
