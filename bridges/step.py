@@ -219,8 +219,10 @@ def mpm_step(x, v, C, F, stress, transfer: Transfer):
 
     Parameters
     ----------
-    x, v : (N, 3) tensors
-        Positions and velocities.
+    x : (N, 3) tensor
+        Positions.
+    v : (N, 3) tensor
+        Velocities.
     C : (N, 3, 3) tensor
         APIC affine velocity.
     F : (N, 3, 3) tensor

@@ -104,11 +104,18 @@ class LoopConfig:
 
     Parameters
     ----------
-    iterations, top_k, exploit, explore : int
-        Outer iterations; solutions shown per prompt (K); offspring per iteration asked at the
-        exploit (low) and explore (high) temperature (M_l, M_h).
-    exploit_temperature, explore_temperature : float
-        T_l and T_h (paper: 0.5 and 1.0).
+    iterations : int
+        Outer iterations.
+    top_k : int
+        Solutions shown per prompt (K).
+    exploit : int
+        Offspring per iteration asked at the exploit (low) temperature (M_l).
+    explore : int
+        Offspring per iteration asked at the explore (high) temperature (M_h).
+    exploit_temperature : float
+        T_l (paper: 0.5).
+    explore_temperature : float
+        T_h (paper: 1.0).
     fidelity : str
         "full": every candidate gets the full fit. "multi": every candidate is first screened
         by a cheaper fit (``screen_fidelity``, see
@@ -178,8 +185,10 @@ class FitConfig:
     ----------
     bilevel : bool
         Fit them (off: evaluate the defaults as proposed).
-    epochs, learning_rate : optional
-        Inner-optimization overrides (default: the task's).
+    epochs : int, optional
+        Epochs of the inner optimization (default: the task's).
+    learning_rate : float, optional
+        Learning rate of the inner optimization (default: the task's).
     """
 
     bilevel: bool = True
@@ -229,8 +238,10 @@ class ExecutorConfig:
         The Ray cluster: "HOST:PORT" of its head node, or "auto" (``RAY_ADDRESS``, else a
         cluster started on this machine with ``ray start``); None starts a private local Ray
         instance for the run.
-    ray_cpus_per_task, ray_memory_mb : optional
-        Ray resources each evaluation reserves: CPUs, and memory in MiB (None: none).
+    ray_cpus_per_task : float
+        CPUs each evaluation reserves in Ray.
+    ray_memory_mb : int, optional
+        Memory in MiB each evaluation reserves in Ray (None: none).
     """
 
     kind: str = "local"
@@ -405,8 +416,18 @@ class SearchConfig:
         The preset the settings started from (a record: its values are in the components).
     seed : int
         Seed passed to the evaluations and the offline proposers.
-    loop, fit, sandbox, executor, model, budgets
-        The components' configs.
+    loop : LoopConfig
+        The outer loop.
+    fit : FitConfig
+        The inner fit.
+    sandbox : SandboxConfig
+        The evaluation processes' limits.
+    executor : ExecutorConfig
+        Where evaluations run.
+    model : ModelConfig
+        The language model's requests.
+    budgets : Budgets
+        When the search stops.
     """
 
     task: str

@@ -48,16 +48,20 @@ class Scene:
 
     Parameters
     ----------
-    positions, velocities : (N, 3) arrays
-        Initial particle state, inside the cube [0, domain_size]^3.
+    positions : (N, 3) array
+        Initial particle positions, inside the cube [0, domain_size]^3.
+    velocities : (N, 3) array
+        Initial particle velocities.
     particle_volume : float
         Initial volume of one particle (m^3).
     density : float
         Mass density (kg/m^3); particle mass = density * particle_volume.
     grid_resolution : int
         Cells per side n of the n^3 grid; dx = domain_size / n.
-    dt, steps : float, int
-        Time step (s) and number of steps.
+    dt : float
+        Time step (s).
+    steps : int
+        Number of steps.
     gravity : 3-tuple
         Acceleration (m/s^2).
     walls : Walls

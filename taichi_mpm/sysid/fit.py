@@ -126,10 +126,12 @@ class FitSettings:
         Most optimizer steps.
     learning_rate : float
         Step size in unconstrained coordinates (0.05 = 5% of E or of the yield stress).
-    tolerance, patience : float, int
+    tolerance : float
         A plateau is a best loss that improved by less than ``tolerance`` (relative) over
         ``patience`` steps: L-BFGS stops there, Adam cuts its step and stops at the
         fourth plateau.
+    patience : int
+        Length, in optimizer steps, of the window of that plateau rule (see ``tolerance``).
     fit_velocity : bool
         Also fit the initial linear and angular velocity of the body (a rigid motion),
         starting from ``initial_velocity`` (default: at rest).

@@ -22,8 +22,10 @@ class Limits:
 
     Parameters
     ----------
-    min_atoms, max_atoms : int
-        Heavy-atom count range (the task allows 8 to 40; 30 keeps evaluations quick).
+    min_atoms : int
+        Fewest heavy atoms (the task allows 8 to 40).
+    max_atoms : int
+        Most heavy atoms (30 keeps evaluations quick).
     max_ring : int
         Largest ring size (larger rings are rarely useful and embed poorly).
     """
