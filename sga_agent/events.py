@@ -4,6 +4,10 @@ Every event is written as a JSON object whose ``"type"`` is the class's :attr:`E
 followed by its fields (``to_dict``); readers compare ``event["type"]`` with those same
 attributes, so each type is spelled once, here. The strings are the run-folder format: runs
 recorded earlier are read back with them, so they never change.
+
+Two kinds of event are only shown, never written: :class:`FitsStarted` and
+:class:`FitProgressed` tell a progress display which evaluations run and how far each has come
+(a fit's epochs), without adding a line per epoch to the log.
 """
 
 from __future__ import annotations
@@ -137,3 +141,27 @@ class RunFinished(Event):
 
     type: ClassVar[str] = "run_finished"
     stopped: str
+
+
+# ---------------------------------------------------------------------- shown, never recorded
+
+
+@dataclass(frozen=True)
+class FitsStarted(Event):
+    """Evaluations were submitted together: the ``candidates``' full fits (``fidelity`` 1) or
+    their screens (below 1). Shown, never recorded."""
+
+    type: ClassVar[str] = "fits_started"
+    candidates: list[str]
+    fidelity: float
+
+
+@dataclass(frozen=True)
+class FitProgressed(Event):
+    """How far a running evaluation of ``candidate`` has come: its latest progress ``note``
+    (:meth:`sga_agent.task.FitProgress.to_dict`). Shown, never recorded; it comes from the
+    evaluator's thread."""
+
+    type: ClassVar[str] = "fit_progress"
+    candidate: str
+    note: dict[str, Any]

@@ -8,8 +8,11 @@ it once. It scores captured solutions: one request per line of its standard inpu
     {"data": <what the task's capture returned>,
      "settings": {"epochs": ..., "learning_rate": ..., "seed": ..., "fidelity": ...}}
 
-and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output.
-It never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
+and one :class:`~sga_agent.task.Evaluation` as a JSON line per request on its standard output,
+after any progress notes (:data:`~sga_agent.helper_protocol.NOTE` lines: "warming up" as each
+warm-up stage starts, "fitting" as a request's fit starts, and what the task reports with
+:func:`~sga_agent.task.report_progress`, such as its epochs), which its parent only shows. It
+never imports or runs a candidate's code: ``data`` is inert JSON, which the task's
 ``evaluate`` checks before it uses it. So what it reports can be believed, and it stays warm
 (torch, Taichi, kernels and ground truth loaded) from one candidate to the next.
 
@@ -37,22 +40,29 @@ import math
 import resource
 import select
 import sys
+import time
 from collections.abc import Iterator
 from typing import IO, Any
 
 from sga_agent import registry
-from sga_agent.helper_protocol import answer, describe, start_helper
+from sga_agent.helper_protocol import NOTE, answer, describe, start_helper
 from sga_agent.options import options_from_data
 from sga_agent.task import (
     Evaluation,
     EvaluationSettings,
+    FitProgress,
     Task,
     TaskBase,
     is_out_of_memory,
+    progress_to,
     release_freed_memory,
+    report_progress,
 )
 
 TRACEBACK_TAIL_CHARS = 4000
+#: Seconds within which a note of the same stage as the last one sent is dropped, so that a
+#: task reporting too often does not flood its parent; a new stage and a fit's last epoch go.
+NOTE_INTERVAL_S = 0.05
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,11 +77,24 @@ def main(argv: list[str] | None = None) -> int:
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     task, options, failure = _set_up(args[0], args[2])
     answer(answers, {"ready": failure is None})
+    with progress_to(Notes(answers)):
+        return serve(task, options, failure, args[3] if len(args) == 4 else None, answers)
+
+
+def serve(
+    task: TaskBase | None,
+    options: Any,
+    failure: Evaluation | None,
+    ahead: str | None,
+    answers: IO[str],
+) -> int:
+    """Warm up, then answer every request of the standard input (``ahead``: the most warm-up
+    stages run ahead of requests, None for all)."""
     stages = None
     if task is not None:
         stages = warm_up(task, options)
-        if stages is not None and len(args) == 4:
-            stages = itertools.islice(stages, int(args[3]))
+        if stages is not None and ahead is not None:
+            stages = itertools.islice(stages, int(ahead))
     while line := next_request(sys.stdin, stages):
         request = json.loads(line)
         if request.get("warm"):
@@ -79,12 +102,31 @@ def main(argv: list[str] | None = None) -> int:
                 stages = _advance(stages)
             answer(answers, {"warm": True})
             continue
+        report_progress("fitting")
         evaluation = failure or score(task, request["data"], request["settings"], options)
         release_freed_memory()  # a warm worker rests at its imports' size, not at the last peak
         answer(answers, evaluation.to_dict())
         if evaluation.status == "out_of_memory":
             return 0
     return 0
+
+
+class Notes:
+    """Sends the progress notes of this process (:func:`~sga_agent.task.report_progress`) to
+    the parent, one line each on the answer stream, less those of a stage reported again
+    within :data:`NOTE_INTERVAL_S`."""
+
+    def __init__(self, answers: IO[str]) -> None:
+        self.answers = answers
+        self.last: tuple[str, float] = ("", -math.inf)  # the stage last sent, and when
+
+    def __call__(self, note: FitProgress) -> None:
+        now = time.monotonic()
+        final = note.epoch is not None and note.epoch == note.epochs
+        if note.stage == self.last[0] and now - self.last[1] < NOTE_INTERVAL_S and not final:
+            return
+        self.last = (note.stage, now)
+        answer(self.answers, {NOTE: note.to_dict()})
 
 
 def _set_up(name: str, options: str) -> tuple[TaskBase | None, Any, Evaluation | None]:
@@ -102,6 +144,7 @@ def _set_up(name: str, options: str) -> tuple[TaskBase | None, Any, Evaluation |
 
 def warm_up(task: Task, options: Any) -> Iterator[None] | None:
     """The stages of the task's own ``warm_up_fit`` still to run (None: all done or none)."""
+    report_progress("warming up")
     try:
         stages = task.warm_up_fit(options)
     except Exception as error:  # the first evaluation meets and reports what is wrong
@@ -120,6 +163,7 @@ def next_request(requests: IO[str], stages: Iterator[None] | None) -> str:
 
 def _advance(stages: Iterator[None]) -> Iterator[None] | None:
     """Run the next warm-up stage; the stages left (None once none is, or one failed)."""
+    report_progress("warming up")
     try:
         next(stages)
     except StopIteration:

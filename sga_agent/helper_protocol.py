@@ -3,7 +3,11 @@ and the form evaluation settings take to reach a fit worker.
 
 The capture server (:mod:`.capture_server`) and the fit worker (:mod:`.fit_worker`) each read
 one JSON request per line of standard input and write one JSON answer per line on the
-original standard output; whatever else prints goes to standard error.
+original standard output; whatever else prints goes to standard error. Before an answer a fit
+worker may write progress notes, lines ``{"progress": {"stage": ..., "epoch": ..., "epochs":
+..., "loss": ...}}`` (:class:`~sga_agent.task.FitProgress`): a line with the key
+:data:`NOTE` is never an answer; the reader shows it if it is well-formed and drops it
+otherwise, so a note can only inform, never change a result.
 """
 
 from __future__ import annotations
@@ -16,10 +20,12 @@ from typing import IO, Any
 
 from sga_agent.isolation import die_with_parent
 from sga_agent.options import options_json
-from sga_agent.task import EvaluationSettings
+from sga_agent.task import EvaluationSettings, FitProgress
 
 #: Characters of an error message kept in a one-line reason.
 MAX_MESSAGE_CHARS = 600
+#: The key of a progress note's line (see the module docstring).
+NOTE = "progress"
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,12 @@ def answer(answers: IO[str], reply: dict[str, Any]) -> None:
     """Write one answer line and flush it."""
     answers.write(json.dumps(reply) + "\n")
     answers.flush()
+
+
+def note_of(reply: dict[str, Any]) -> FitProgress | None:
+    """The progress note a line read from a helper holds, checked (None: malformed, dropped);
+    call it only for a line that is a note (``NOTE in reply``)."""
+    return FitProgress.from_dict(reply.get(NOTE))
 
 
 def first_line(text: str) -> str:

@@ -11,7 +11,10 @@ score is computed. Each evaluation has two steps, each in its own process:
    task's ``capture(solution)`` and sends back JSON data through a pipe the server owns.
 2. **Fit** (trusted). A fit worker (``python -m sga_agent.fit_worker TASK``), one per pool slot
    and warm from one candidate to the next, runs the task's ``evaluate(data, settings)``. It
-   never imports or runs candidate code; the task checks the data before using it.
+   never imports or runs candidate code; the task checks the data before using it. The
+   progress notes it writes before its answer (its warm-up, the fit's epochs; see
+   :mod:`sga_agent.helper_protocol`) go to the caller's ``progress`` callable, if any, and
+   nowhere else: they are shown, never part of the result.
 
 Whatever goes wrong comes back as an invalid ``Evaluation`` with a ``status`` and a one-line
 ``reason``, never as an exception in the caller. A helper that fails in a way the candidate may
@@ -66,9 +69,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from sga_agent.helper_protocol import FitSettings
+from sga_agent.helper_protocol import NOTE, FitSettings, note_of
 from sga_agent.isolation import Isolation, detect_isolation
-from sga_agent.task import STATUSES, Evaluation, EvaluationSettings
+from sga_agent.task import STATUSES, Evaluation, EvaluationSettings, FitProgress
+
+#: Told each progress note of an evaluation (:class:`~sga_agent.task.FitProgress`).
+ProgressCallback = Callable[[FitProgress], None]
 
 #: Environment variables the worker keeps (besides the prefixes below).
 KEPT_VARIABLES = frozenset(
@@ -211,25 +217,29 @@ class _LineProcess:
         self._pending = bytearray()
 
     def ask(
-        self, message: dict[str, Any] | None, timeout_s: float, last: bool = False
+        self,
+        message: dict[str, Any] | None,
+        timeout_s: float,
+        last: bool = False,
+        progress: ProgressCallback | None = None,
     ) -> dict[str, Any]:
         """Send ``message`` (None: just wait) and return the answer line, parsed; ``last``:
-        close the input once it is sent (the process exits once it has answered).
+        close the input once it is sent (the process exits once it has answered). Progress
+        notes that come before the answer go to ``progress`` (see :func:`_tell`).
 
         Raises :class:`HelperFailure` (after killing the process) when it does not answer in
         time, exits, or answers something that is not a JSON object.
         """
         assert self.process.stdin is not None and self.process.stdout is not None
+        deadline = time.monotonic() + timeout_s
         try:
             if message is not None:
                 self.process.stdin.write((json.dumps(message) + "\n").encode())
                 self.process.stdin.flush()
             if last:
                 self.end_input()
-            line = self._read_line(time.monotonic() + timeout_s)
-            answer = json.loads(line)
-            if not isinstance(answer, dict):
-                raise ValueError("not a JSON object")
+            while NOTE in (answer := _parsed(self._read_line(deadline))):
+                _tell(progress, note_of(answer))
             return answer
         except (OSError, ValueError, HelperFailure) as error:
             raise self._failed(error) from None
@@ -243,14 +253,16 @@ class _LineProcess:
             self.process.stdin.flush()
 
     def poll(self) -> dict[str, Any] | None:
-        """The next answer if it has come, else None, without waiting; raises
-        :class:`HelperFailure` (after killing the process) as :meth:`ask` does."""
+        """The next answer if it has come, else None, without waiting (progress notes before
+        it are dropped); raises :class:`HelperFailure` (after killing the process) as
+        :meth:`ask` does."""
         try:
-            if not self._fill(0.0):
-                return None
-        except (OSError, HelperFailure) as error:
+            while self._fill(0.0):
+                if NOTE not in (answer := _parsed(self._read_line(time.monotonic()))):
+                    return answer
+        except (OSError, ValueError, HelperFailure) as error:
             raise self._failed(error) from None
-        return self.ask(None, 0.0)
+        return None
 
     def _failed(self, error: Exception) -> HelperFailure:
         """Kill the process; the failure, with its exit status if it had ended by itself."""
@@ -476,6 +488,7 @@ class EvaluationSlot:
         settings: FitSettings,
         on_captured: Callable[[str, str], None] | None = None,
         captured: dict[str, Any] | None = None,
+        progress: ProgressCallback | None = None,
     ) -> Evaluation:
         """Capture then fit one solution; every failure is an invalid Evaluation.
 
@@ -484,7 +497,9 @@ class EvaluationSlot:
         capture step has ended. A step tried again (see the class docstring) has the time it
         had the first time. ``captured``, the data an earlier evaluation of this solution
         captured (its ``artifacts["captured"]``, inert data the fit checks again), skips the
-        capture: the solution is fitted again, at another fidelity say.
+        capture: the solution is fitted again, at another fidelity say. ``progress`` is told
+        how far it has come: "capturing the solution", "starting the fit worker", then the
+        fit worker's notes (warm-up, the fit's epochs); never what the evaluation returns.
         """
         start = time.monotonic()
         options, request = settings.options, settings.request()
@@ -493,6 +508,7 @@ class EvaluationSlot:
         attempt = start
         outcome: dict[str, Any] | Evaluation | _Blameless | None = captured
         if outcome is None:
+            _tell(progress, FitProgress("capturing the solution"))
             outcome = self._captured(task, solution)
             if isinstance(outcome, _Blameless) and not self._stopped:
                 retried.append(outcome.why)
@@ -506,11 +522,11 @@ class EvaluationSlot:
             evaluation = outcome
         else:
             remaining = self.limits.timeout_s - (captured_at - attempt)
-            fitted = self._fitted(outcome, request, remaining)
+            fitted = self._fitted(outcome, request, remaining, progress)
             if isinstance(fitted, _Blameless) and not self._stopped:
                 retried.append(fitted.why)
                 self._start_fit_worker(task, options)
-                fitted = self._fitted(outcome, request, remaining)
+                fitted = self._fitted(outcome, request, remaining, progress)
             evaluation = _verdict(fitted)
         evaluation.seconds = time.monotonic() - start
         # to the millisecond below, never above the whole evaluation's seconds
@@ -632,7 +648,11 @@ class EvaluationSlot:
     # ---------------------------------------------------------------------- fit
 
     def _fitted(
-        self, data: dict[str, Any], settings: dict[str, Any], remaining: float
+        self,
+        data: dict[str, Any],
+        settings: dict[str, Any],
+        remaining: float,
+        progress: ProgressCallback | None = None,
     ) -> Evaluation | _Blameless:
         if remaining <= 0:
             return _failure(
@@ -640,14 +660,14 @@ class EvaluationSlot:
             )
         self._take_warm_spare()
         try:
-            worker = self._ready_fit_worker()
+            worker = self._ready_fit_worker(progress)
         except HelperFailure as error:
             failure = Evaluation.invalid(f"the fit worker did not start: {error}", status="error")
             return _blameless_start(failure, "the fit worker", error)
         earlier = self._fit_evaluations
         try:
             answer = worker.ask({"data": data, "settings": settings}, remaining,
-                                last=self.one_shot)  # fmt: skip
+                                last=self.one_shot, progress=progress)  # fmt: skip
         except HelperFailure as error:
             self._fit = None
             if str(error) == "timeout":
@@ -706,15 +726,17 @@ class EvaluationSlot:
         number = self._fit_workers_started
         return _LineProcess(command, env, self._folder, "fit" if number == 1 else f"fit-{number}")
 
-    def _ready_fit_worker(self) -> _LineProcess:
+    def _ready_fit_worker(self, progress: ProgressCallback | None = None) -> _LineProcess:
         """The started fit worker, once it has said it is ready (and, a replacement, that it
-        has warmed up)."""
+        has warmed up); ``progress`` hears of the wait."""
         if self._fit is None:
             raise HelperFailure("the pool was stopped")
         worker = self._fit[1]
+        if self._fit_awaiting:
+            _tell(progress, FitProgress("starting the fit worker"))
         try:  # not ready: a task that cannot load, each answer says why
             while self._fit_awaiting:
-                worker.ask(None, START_TIMEOUT_S)
+                worker.ask(None, START_TIMEOUT_S, progress=progress)
                 self._fit_awaiting -= 1
         except HelperFailure as error:
             self._fit = None
@@ -854,6 +876,22 @@ def _crashed(reply: dict[str, Any], limits: SandboxLimits) -> Evaluation:
     )
 
 
+def _parsed(line: bytes) -> dict[str, Any]:
+    """A helper's line as the JSON object it must be (``ValueError`` otherwise)."""
+    answer = json.loads(line)
+    if not isinstance(answer, dict):
+        raise ValueError("not a JSON object")
+    return answer
+
+
+def _tell(progress: ProgressCallback | None, note: FitProgress | None) -> None:
+    """Hand ``note`` (None: a malformed one, dropped) to ``progress``; whatever ``progress``
+    does (a display that fails) never reaches the evaluation."""
+    if progress is not None and note is not None:
+        with contextlib.suppress(Exception):
+            progress(note)
+
+
 def _clean(text: str) -> str:
     """Untrusted text made one printable line of bounded length."""
     printable = "".join(ch if ch.isprintable() else " " for ch in text)
@@ -891,6 +929,7 @@ def evaluate_in_sandbox(
     limits: SandboxLimits = SandboxLimits(),  # noqa: B008 (frozen, so sharing it is safe)
     *,
     extra_python_path: Sequence[str | os.PathLike[str]] = (),
+    progress: ProgressCallback | None = None,
 ) -> Evaluation:
     """Evaluate ``solution`` for ``task``: capture it confined, fit it in a trusted process.
 
@@ -910,6 +949,9 @@ def evaluate_in_sandbox(
     extra_python_path : sequence of path-like
         Directories put in front of the helpers' ``PYTHONPATH`` so that a ``"module:callable"``
         task outside the installed packages can be imported (plugin development, tests).
+    progress : callable, optional
+        Told how far the evaluation has come (see :meth:`EvaluationSlot.evaluate`), in this
+        thread: for a display only, it cannot change the result.
 
     Returns
     -------
@@ -925,7 +967,7 @@ def evaluate_in_sandbox(
     sent = FitSettings.of(settings)
     evaluator = EvaluationSlot(limits, extra_python_path, one_shot=True)
     try:
-        return evaluator.evaluate(task, solution, sent)
+        return evaluator.evaluate(task, solution, sent, progress=progress)
     finally:
         evaluator.close()
 
@@ -989,16 +1031,18 @@ class SandboxPool:
         solution: str,
         settings: EvaluationSettings,
         captured: dict[str, Any] | None = None,
+        progress: ProgressCallback | None = None,
     ) -> Future[Evaluation]:
         """Start evaluating one solution; the future's result is its :class:`Evaluation`.
 
-        ``captured`` (see :meth:`EvaluationSlot.evaluate`) fits it again without a capture.
+        ``captured`` (see :meth:`EvaluationSlot.evaluate`) fits it again without a capture;
+        ``progress`` is told how far it has come, from the pool's thread that evaluates it.
         Raises ``TypeError`` at once if ``settings.options`` cannot be sent (see
         :func:`evaluate_in_sandbox`); a bad candidate never raises: its future holds an invalid
         Evaluation.
         """
         sent = FitSettings.of(settings)
-        return self._executor.submit(self._evaluate, task, solution, sent, captured)
+        return self._executor.submit(self._evaluate, task, solution, sent, captured, progress)
 
     def map(
         self, task: str, solutions: Iterable[str], settings: EvaluationSettings
@@ -1039,11 +1083,18 @@ class SandboxPool:
             self.terminate()
 
     def _evaluate(
-        self, task: str, solution: str, settings: FitSettings, captured: dict[str, Any] | None
+        self,
+        task: str,
+        solution: str,
+        settings: FitSettings,
+        captured: dict[str, Any] | None,
+        progress: ProgressCallback | None,
     ) -> Evaluation:
         evaluator = self._slots.get()
         try:
-            return evaluator.evaluate(task, solution, settings, self._start_idle_slots, captured)
+            return evaluator.evaluate(
+                task, solution, settings, self._start_idle_slots, captured, progress
+            )
         except Exception as error:  # the sandbox itself failed, e.g. no space for its folder
             reason = f"the sandbox failed: {type(error).__name__}: {error}"
             return Evaluation.invalid(reason, status="error")

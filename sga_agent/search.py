@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import math
 import time
 from collections.abc import Callable
@@ -32,7 +33,15 @@ from sga_agent.prompting import Shown, count_tokens, fit_to_budget
 from sga_agent.proposers.base import Messages, Proposal, ProposalRequest, Proposer, ProposerError
 from sga_agent.reading import read_answer, split_reasoning
 from sga_agent.run_store import SEED, RunStore
-from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, Parent, Task, options_type
+from sga_agent.task import (
+    CodeRejected,
+    Evaluation,
+    EvaluationSettings,
+    FitProgress,
+    Parent,
+    Task,
+    options_type,
+)
 
 __all__ = [
     "SEED", "Evaluator", "Search", "SearchResult", "Totals", "kth_best", "promoted", "slots_of",
@@ -43,7 +52,11 @@ class Evaluator(Protocol):
     """Evaluates solutions of a task concurrently (the sandbox pool, or a test double).
 
     A multi-fidelity search passes ``captured`` (a keyword, only then) for a promoted
-    candidate: the data its screen captured, fitted again without a capture.
+    candidate: the data its screen captured, fitted again without a capture. An evaluator
+    whose ``submit`` takes a keyword ``progress`` is given, with each evaluation, a callable
+    to tell its progress notes (:class:`~sga_agent.task.FitProgress`; any thread), which the
+    search shows as :class:`~sga_agent.events.FitProgressed` events; one without it works as
+    before.
     """
 
     def submit(
@@ -100,7 +113,9 @@ class Search:
     evaluator : Evaluator
     store : RunStore
     on_event : callable, optional
-        Called with every event (progress display).
+        Called with every event (progress display), recorded or only shown (see
+        :mod:`sga_agent.events`); the progress notes of running evaluations come from the
+        evaluator's threads.
     """
 
     def __init__(
@@ -124,6 +139,7 @@ class Search:
         self.task = task
         self.proposer = proposer
         self.evaluator = evaluator
+        self._reports_progress = _takes_progress(evaluator)
         self.store = store
         self.on_event = on_event or (lambda event: None)
         recorded = store.recorded()
@@ -357,10 +373,10 @@ class Search:
                 if stopped:
                     break
                 submitted.add(key)
-                future = self.evaluator.submit(self.config.task, code, settings)
-                pending[future] = (candidate, code)
+                pending[self._submit(candidate, code, settings)] = (candidate, code)
             screened.append((candidate, key))
         codes = {candidate: code for candidate, code, _ in candidates}
+        self._started_fits(pending, settings)
         for future in as_completed(pending):
             candidate, code = pending[future]
             evaluation = future.result()
@@ -425,8 +441,10 @@ class Search:
                 if stopped:
                     break
                 submitted.add(key)
-                pending[self._submit(code, key)] = (candidate, code)
+                captured = self._captured.pop(key, None)
+                pending[self._submit(candidate, code, self.settings, captured)] = (candidate, code)
             order.append((candidate, code, key))
+        self._started_fits(pending, self.settings)
         for future in as_completed(pending):
             self._store(*pending[future], future.result())
         for candidate, code, key in order:
@@ -438,13 +456,32 @@ class Search:
             self._push(candidate, code, key, self._evaluations[candidate])
         return stopped
 
-    def _submit(self, code: str, key: str) -> Future[Evaluation]:
-        """Submit the full evaluation of ``code`` (fingerprint ``key``): fitted again from
-        its screen's captured data where that is at hand, else captured anew."""
-        captured = self._captured.pop(key, None)
-        if captured is None:
-            return self.evaluator.submit(self.config.task, code, self.settings)
-        return self.evaluator.submit(self.config.task, code, self.settings, captured=captured)
+    def _submit(
+        self,
+        candidate: str,
+        code: str,
+        settings: EvaluationSettings,
+        captured: dict[str, Any] | None = None,
+    ) -> Future[Evaluation]:
+        """Submit the evaluation of ``candidate``'s ``code`` with ``settings``: fitted again
+        from its screen's ``captured`` data where that is at hand, else captured anew; its
+        progress notes are shown where the evaluator tells them."""
+        extra: dict[str, Any] = {} if captured is None else {"captured": captured}
+        if self._reports_progress:
+            extra["progress"] = functools.partial(self._progressed, candidate)
+        return self.evaluator.submit(self.config.task, code, settings, **extra)
+
+    def _progressed(self, candidate: str, note: FitProgress) -> None:
+        """Show a progress note of ``candidate``'s running evaluation (never recorded)."""
+        self._show(ev.FitProgressed(candidate, note.to_dict()))
+
+    def _started_fits(
+        self, pending: dict[Future[Evaluation], tuple[str, str]], settings: EvaluationSettings
+    ) -> None:
+        """Show which candidates were just submitted (never recorded), if any were."""
+        if pending:
+            candidates = [candidate for candidate, _ in pending.values()]
+            self._show(ev.FitsStarted(candidates, settings.fidelity))
 
     def _note_form(self, candidate: str, code: str) -> None:
         """Remember the first candidate of ``code``'s form; a later one of the same form (the
@@ -507,10 +544,13 @@ class Search:
         return self.config.budgets.exceeded(spent, ("max_evaluations", "max_seconds"))
 
     def _emit(self, event: ev.Event) -> None:
-        """Record ``event``, then show it (as its dict, with the totals) to ``on_event``."""
-        data = event.to_dict()
-        self.store.append(data)
-        self.on_event({**data, "totals": self.totals})
+        """Record ``event``, then show it."""
+        self.store.append(event.to_dict())
+        self._show(event)
+
+    def _show(self, event: ev.Event) -> None:
+        """Show ``event`` (as its dict, with the totals) to ``on_event``."""
+        self.on_event({**event.to_dict(), "totals": self.totals})
 
     def _summary(self, result: SearchResult) -> dict[str, Any]:
         best = result.best
@@ -526,6 +566,14 @@ class Search:
             "invalid": result.totals.invalid,
             "screened": result.totals.screened,
         }
+
+
+def _takes_progress(evaluator: Evaluator) -> bool:
+    """Whether ``evaluator.submit`` takes a keyword ``progress`` (see :class:`Evaluator`)."""
+    try:
+        return "progress" in inspect.signature(evaluator.submit).parameters
+    except (TypeError, ValueError):  # no signature to read: it is not told
+        return False
 
 
 def slots_of(loop: LoopConfig, iteration: int) -> list[tuple[str, float]]:

@@ -37,11 +37,13 @@ def report(run_dir: Path, out: Path | None, no_motion: bool, as_json: bool) -> N
 
     It leads with a summary (the best loss against the seed's and the true law's, the ground
     truth, the best solution with its fitted constants, the free-run error of a law or the top
-    molecules), then the free run or the molecules, the bilevel picture, the best loss against
+    molecules, the evaluations and screens counted as the search's end screen counts them),
+    then the free run or the molecules, the bilevel picture, the best loss against
     evaluations and time, the inner-loop curves of the top 3 distinct solutions, the
-    outcomes and a table of every candidate (its status, cause of failure, fitted values,
-    plan and parents, with its answer's analysis, plan and reasoning folded in); the
-    settings, isolation record and raw feedback come last, folded.
+    outcomes (of the screens too) and a table of every candidate (its status, cause of
+    failure, fitted values, plan and parents, its screen and whether it was promoted, with its
+    answer's analysis, plan and reasoning folded in); the settings, isolation record and raw
+    feedback come last, folded.
     """
     from sga_agent.report import build_report
 

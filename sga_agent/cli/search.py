@@ -33,6 +33,7 @@ from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunFolderFull, RunStore, RunStoreError
 from sga_agent.task import TaskBase, as_task, configured
+from sga_agent.wording import counted
 
 
 class SearchCommand(click.Command):
@@ -282,7 +283,8 @@ def execute(
     task: TaskBase,
     new_run: bool = False,
 ) -> None:
-    """Run ``task`` (set up for the run's options) with a progress display, then print the
+    """Run ``task`` (set up for the run's options) with a progress display on standard error
+    (live on a terminal, plain lines elsewhere: see :class:`SearchProgress`), then print the
     result. A ``new_run`` whose cluster cannot be reached before anything was evaluated
     leaves no run folder behind."""
     console = Console(stderr=as_json, highlight=False)
@@ -290,10 +292,12 @@ def execute(
         console.print(f"run folder: {store.path}", soft_wrap=True)
     resume = f"`sga-agent resume {store.path}` continues the run"
     recorded = store.recorded()
+    shown = Console(stderr=True, highlight=False)
+    assessing = as_task(task).describe_assessment(True)  # what the run's end does
     try:
         with (
             interrupts_stop_the_search(),
-            SearchProgress(console, config, recorded) as progress,
+            SearchProgress(shown, config, recorded, assessing) as progress,
         ):
             result = runner.run(config, store, progress, proposer, task)
     except RayUnavailableError as error:  # no cluster: stop
@@ -307,7 +311,7 @@ def execute(
     except RunFolderFull as error:  # the disk is full: the message says what to do
         raise click.ClickException(str(error)) from error
     except KeyboardInterrupt:
-        finished = len(store.recorded().evaluations)
-        click.echo(f"interrupted: {finished} finished evaluations are recorded; {resume}", err=True)
+        finished = counted(len(store.recorded().evaluations), "finished evaluation")
+        click.echo(f"interrupted: {finished} recorded; {resume}", err=True)
         raise SystemExit(INTERRUPTED) from None
     print_result(console, store, result, as_json, task, config)

@@ -9,25 +9,23 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from sga_agent.config import flat_settings
 from sga_agent.registry import load_task
 from sga_agent.report import plots
 from sga_agent.report.candidates import candidates_section
-from sga_agent.report.data import Run, read_run
+from sga_agent.report.data import Candidate, Run, Screen, read_run
 from sga_agent.report.findings import TOP, Findings, distinct, find
 from sga_agent.report.render import Code, Image, Section, Table, Text, write
 from sga_agent.task import STATUSES, ReportView, TaskBase
+from sga_agent.wording import counted, times_below
 
 
 def _loss(value: float | None) -> str:
     return f"{value:.4g}" if value is not None and math.isfinite(value) else "inf"
-
-
-def _times(ratio: float) -> str:
-    return f"{ratio:.3g}x" if ratio < 1e4 else f"{ratio:.1e}x".replace("e+", "e")
 
 
 def loss_line(findings: Findings) -> str:
@@ -39,13 +37,47 @@ def loss_line(findings: Findings) -> str:
     if best.id == (seed.id if seed else None):
         line += ", the seed's: no candidate did better"
     elif findings.seed_over_best is not None and seed is not None:
-        line += f", **{_times(findings.seed_over_best)} below** the seed's {_loss(seed.loss)}"
+        line += f", **{times_below(findings.seed_over_best)}** the seed's {_loss(seed.loss)}"
     assessment = findings.assessment
     if assessment is not None and assessment.truth_loss is not None:
         line += f"; the true law's: {_loss(assessment.truth_loss)}"
         if findings.best_over_truth is not None:
-            line += f" (the best is **{_times(findings.best_over_truth)} above** it)"
+            line += f" (the best is **{times_below(1 / findings.best_over_truth)}** it)"
     return line
+
+
+def by_status(what: str, records: Iterable[Candidate | Screen]) -> str:
+    """``"N whats (n1 ok, n2 unstable)"`` (``what`` in the singular: "1 screen (1 ok)") as the
+    search's end screen counts ``records``: repeats of earlier code left out, the most frequent
+    status first, ties in the given order (the order the run recorded them)."""
+    statuses = Counter(record.status for record in records if not record.repeat)
+    parts = ", ".join(f"{count} {status}" for status, count in statuses.most_common())
+    return f"{counted(sum(statuses.values()), what)} ({parts})"
+
+
+def counts_line(run: Run) -> str:
+    """The full fits by status, then a multi-fidelity search's screens, in the end screen's
+    words: ``"7 evaluations (7 ok) after 24 screens (19 ok, 5 unstable)"``."""
+    text = by_status("evaluation", plots.evaluated_in_order(run))
+    screens = [candidate.screen for candidate in run.screens() if candidate.screen is not None]
+    if screens:
+        recorded = sorted(screens, key=lambda screen: (screen.time is None, screen.time or 0.0))
+        text += " after " + by_status("screen", recorded)
+    return text
+
+
+def screens_line(run: Run) -> str:
+    """How a multi-fidelity search screened its candidates and how many screens it promoted to
+    a full fit, as a list item ("" for a run without screens)."""
+    screened = [c for c in run.screens() if c.screen is not None and not c.screen.repeat]
+    if not screened:
+        return ""
+    fidelity = (run.config.get("loop") or {}).get("screen_fidelity")
+    short = f" ({fidelity:g} of a full fit)" if isinstance(fidelity, int | float) else ""
+    promoted = sum(candidate.promoted for candidate in screened)
+    return (f"- screens: candidates were screened by a short fit{short}, whose loss compares "
+            f"only with other screens'; **{promoted} of the {len(screened)} screens** were "
+            "promoted to a full fit (the Candidates table's screen column names them)")  # fmt: skip
 
 
 def summary_section(
@@ -68,12 +100,13 @@ def summary_section(
     if findings.assessment_error:
         lines.append(f"- the task could not assess the best solution: {findings.assessment_error}")
     duration = f" in {findings.duration_s / 60:.1f} min" if findings.duration_s else ""
-    ok = sum(c.status == "ok" for c in run.candidates)
     proposer = run.config.get("proposer")
     lines.append(
-        f"- {len(run.candidates)} evaluations ({ok} ok){duration}, proposer `{proposer}`, "
+        f"- {counts_line(run)}{duration}, proposer `{proposer}`, "
         f"{run.tokens} tokens, ${run.cost_usd:.4f}"
     )
+    if screens := screens_line(run):
+        lines.append(screens)
     if run.summary and run.summary.get("stopped"):
         lines.append(f"- stopped: {run.summary['stopped']}")
     blocks: list = [Text("\n".join(lines))]
@@ -95,10 +128,36 @@ def summary_section(
 
 
 def outcomes_table(run: Run) -> Table:
+    """The full fits of each iteration by outcome."""
     counts = plots.outcome_counts(run)
     rows = [[str(i), *(str(counts[i][s]) for s in STATUSES), str(sum(counts[i].values()))]
             for i in counts]  # fmt: skip
     return Table(["iteration", *STATUSES, "total"], rows)
+
+
+def screens_table(run: Run) -> Table:
+    """The screens of each iteration that made any, by outcome, and how many were promoted to
+    a full fit."""
+    counts = plots.outcome_counts(run, screens=True)
+    promoted = plots.promoted_counts(run)
+    rows = [[str(i), *(str(counts[i][s]) for s in STATUSES), str(sum(counts[i].values())),
+             str(promoted[i])] for i in counts if any(counts[i].values())]  # fmt: skip
+    return Table(["iteration", *STATUSES, "screens", "promoted"], rows)
+
+
+def outcomes_section(run: Run, figure: Path) -> Section:
+    """The outcomes chart with the full fits' table, and for a multi-fidelity search the
+    screens' table."""
+    if not run.screens():
+        chart = Image(figure.name, "outcomes per iteration")
+        return Section("Outcomes per iteration", [chart, outcomes_table(run)])
+    return Section("Outcomes per iteration", [
+        Text("Each iteration's screens (hatched, left) and full fits (plain, right) by outcome; "
+             "a candidate repeating earlier code counts here too."),
+        Image(figure.name, "screens and full fits per iteration, by outcome"),
+        Text("Full fits:"), outcomes_table(run),
+        Text("Screens, and how many of them were promoted to a full fit:"), screens_table(run),
+    ])  # fmt: skip
 
 
 def records_sections(run: Run, findings: Findings) -> list[Section]:
@@ -181,8 +240,7 @@ def build_report(
             Text(", ".join(f"{c.id} (loss {_loss(c.loss)})" for c in top) or "none scored"),
             Image(figures[3].name, "inner-loop curves"),
         ]),
-        Section("Outcomes per iteration",
-                [Image(figures[4].name, "outcomes per iteration"), outcomes_table(run)]),
+        outcomes_section(run, figures[4]),
         candidates_section(run, folder),
         *records_sections(run, findings),
     ]  # fmt: skip

@@ -13,6 +13,8 @@ from sga_agent.report.render import Fold, FoldedTable, Section, Text
 
 HEADER = ["candidate", "iteration", "temperature", "status", "cause", "loss", "fitted", "plan",
           "parents"]  # fmt: skip
+#: The column a multi-fidelity search's table adds after the loss: the screen and its promotion.
+SCREEN_COLUMN = "screen"
 #: The answer's texts folded into each row: its :class:`~.data.Answer` field and its file in the
 #: candidate's folder.
 TEXTS = (("analysis", "analysis.md"), ("plan", "plan.md"), ("reasoning", "reasoning.md"))
@@ -71,11 +73,29 @@ def cause(candidate: Candidate) -> str:
     return f"{candidate.cause} ({earlier})" if candidate.cause and earlier else candidate.cause
 
 
-def row(candidate: Candidate) -> list[str]:
-    """The candidate's cells, in :data:`HEADER`'s order."""
+def screen(candidate: Candidate) -> str:
+    """Its screen's loss and outcome and whether it was promoted to a full fit:
+    ``"0.031 ok, promoted"``, ``"unstable, not promoted"``; "" when it was not screened."""
+    if candidate.screen is None:
+        return ""
+    loss = candidate.screen.loss
+    text = f"{loss:.4g} " if math.isfinite(loss) else ""
+    promoted = "promoted" if candidate.promoted else "not promoted"
+    return f"{text}{candidate.screen.status}, {promoted}"
+
+
+def header(screens: bool) -> list[str]:
+    """The table's columns: :data:`HEADER`, with :data:`SCREEN_COLUMN` after the loss when the
+    run has ``screens``."""
+    at = HEADER.index("loss") + 1
+    return [*HEADER[:at], SCREEN_COLUMN, *HEADER[at:]] if screens else HEADER
+
+
+def row(candidate: Candidate, screens: bool = False) -> list[str]:
+    """The candidate's cells, in :func:`header`'s order."""
     answer = candidate.answer
     temperature = answer.temperature if answer else None
-    return [
+    cells = [
         candidate.id,
         str(candidate.iteration),
         f"{temperature:g}" if temperature is not None else "",
@@ -86,6 +106,9 @@ def row(candidate: Candidate) -> list[str]:
         first_line(answer.plan) if answer else "",
         ", ".join(answer.parents) if answer else "",
     ]
+    if screens:
+        cells.insert(HEADER.index("loss") + 1, screen(candidate))
+    return cells
 
 
 def folds(candidate: Candidate, report: Path) -> list[Fold]:
@@ -106,8 +129,14 @@ def candidates_section(run: Run, report: Path) -> Section:
     """One row per candidate (screens never fitted fully too), in the order they were made;
     ``report`` is the report's folder, which the Markdown's links start from."""
     every = run.every_candidate()
-    table = FoldedTable(HEADER, [row(c) for c in every], [folds(c, report) for c in every])
+    screens = bool(run.screens())
+    rows = [row(c, screens) for c in every]
+    table = FoldedTable(header(screens), rows, [folds(c, report) for c in every])
     note = ("Every candidate, in the order it was made: the temperature it was sampled at, how "
             "it ended and why, the constants fitted, the first line of its plan and the "
             "candidates its prompt showed (worst first).")  # fmt: skip
+    if screens:
+        note += (" The screen column gives the loss and outcome of its screen (a short fit, "
+                 "compared only with other screens) and whether that promoted it to a full fit; "
+                 "a candidate never fitted fully shows its screen's status and loss.")  # fmt: skip
     return Section("Candidates", [Text(note), table])

@@ -10,7 +10,12 @@ from typing import Any
 
 from sga_agent.causes import cause_of
 from sga_agent.config import current_format
-from sga_agent.events import CandidateEvaluated, ProposalReceived, SandboxReady
+from sga_agent.events import (
+    CandidateEvaluated,
+    CandidateScreened,
+    ProposalReceived,
+    SandboxReady,
+)
 from sga_agent.heap import ranked_loss
 from sga_agent.run_store import CONFIG, SCREEN, SUMMARY, RunStore
 
@@ -26,6 +31,17 @@ class Answer:
     analysis: str = ""
     plan: str = ""
     reasoning: str = ""  # the provider's own reasoning, apart from the answer
+
+
+@dataclass
+class Screen:
+    """A candidate's screen in a multi-fidelity search: its short fit (``screen.json``), whose
+    loss compares only with other screens'."""
+
+    status: str
+    loss: float
+    repeat: bool = False  # a copy of an earlier screen of the same code (counted once)
+    time: float | None = None  # when it was recorded (seconds since the epoch)
 
 
 @dataclass
@@ -46,6 +62,7 @@ class Candidate:
     cause: str = ""  # why it failed, in one line (:func:`~sga_agent.causes.cause_of`)
     answer: Answer | None = None  # None for the seed and other candidates no proposer wrote
     screen_only: bool = False  # screened but never fitted fully: its status is the screen's
+    screen: Screen | None = None  # its screen, in a multi-fidelity search
 
     def artifacts(self) -> dict[str, Any]:
         """What the trusted fit left for reports (read when asked: it can be large)."""
@@ -55,6 +72,16 @@ class Candidate:
     def iteration(self) -> int:
         """The search iteration, from the id's prefix (``00-seed`` is iteration 0)."""
         return int(self.id.split("-", 1)[0])
+
+    @property
+    def repeat(self) -> bool:
+        """Whether its code repeats an earlier candidate's (the end screen does not count it)."""
+        return "duplicate_of" in self.extras
+
+    @property
+    def promoted(self) -> bool:
+        """Whether it was screened, then fitted in full."""
+        return self.screen is not None and not self.screen_only
 
 
 @dataclass
@@ -105,6 +132,11 @@ class Run:
         every = [*self.candidates, *self.screened]
         return sorted(every, key=lambda candidate: (candidate.iteration, candidate.id))
 
+    def screens(self) -> list[Candidate]:
+        """The screened candidates (none outside a multi-fidelity search), by iteration, then
+        id; each holds its :class:`Screen`."""
+        return [candidate for candidate in self.every_candidate() if candidate.screen is not None]
+
 
 def _read_json(path: Path, default: Any) -> Any:
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else default
@@ -130,6 +162,18 @@ def read_answer(folder: Path) -> Answer | None:
     )
 
 
+def read_screen(folder: Path) -> Screen | None:
+    """The screen recorded in ``folder`` (``screen.json``), or None when it has none."""
+    screen = _read_json(folder / SCREEN, None)
+    if screen is None:
+        return None
+    return Screen(
+        status=screen.get("status", "ok" if screen.get("valid") else "invalid"),
+        loss=float(screen.get("loss", math.inf)),
+        repeat="duplicate_of" in (screen.get("extras") or {}),
+    )
+
+
 def _candidate(folder: Path, evaluation: dict[str, Any], screen_only: bool = False) -> Candidate:
     return Candidate(
         id=folder.name,
@@ -145,6 +189,7 @@ def _candidate(folder: Path, evaluation: dict[str, Any], screen_only: bool = Fal
         cause=cause_of(evaluation),
         answer=read_answer(folder),
         screen_only=screen_only,
+        screen=read_screen(folder),
     )
 
 
@@ -183,11 +228,14 @@ def read_run(path: Path) -> Run:
         screened=[c for c in map(read_screen_only, folders) if c is not None],
     )
     by_id = {candidate.id: candidate for candidate in candidates}
+    screens = {candidate.id: candidate.screen for candidate in run.screens()}
     for event in store.events():
         if run.started is None and isinstance(event.get("time"), int | float):
             run.started = float(event["time"])
         if event.get("type") == CandidateEvaluated.type and event.get("candidate") in by_id:
             by_id[event["candidate"]].time = event.get("time")
+        elif event.get("type") == CandidateScreened.type and event.get("candidate") in screens:
+            screens[event["candidate"]].time = event.get("time")
         elif event.get("type") == SandboxReady.type:
             run.sandbox = event.get("isolation")
         elif event.get("type") == ProposalReceived.type:

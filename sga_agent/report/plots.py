@@ -10,8 +10,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.ticker import NullFormatter
+from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator, NullFormatter
 
 from sga_agent.report.data import Candidate, Run
 from sga_agent.task import DPI, FONT, STATUSES
@@ -38,11 +40,28 @@ def save(figure: Figure, path: Path) -> Path:
     return path
 
 
-def outcome_counts(run: Run) -> dict[int, dict[str, int]]:
-    """For each iteration, how many candidates ended in each status."""
-    counts = {iteration: dict.fromkeys(STATUSES, 0) for iteration in run.iterations}
-    for candidate in run.candidates:
-        counts[candidate.iteration][candidate.status] += 1
+def _iterations(run: Run) -> list[int]:
+    """The iterations with a full fit or a screen, in order."""
+    return sorted({candidate.iteration for candidate in run.every_candidate()})
+
+
+def outcome_counts(run: Run, screens: bool = False) -> dict[int, dict[str, int]]:
+    """For each iteration (with a full fit or a screen), how many candidates' full fits, or
+    with ``screens`` their screens, ended in each status."""
+    counts = {iteration: dict.fromkeys(STATUSES, 0) for iteration in _iterations(run)}
+    for candidate in run.screens() if screens else run.candidates:
+        outcome = candidate.screen if screens else candidate
+        if outcome is not None:
+            counts[candidate.iteration][outcome.status] += 1
+    return counts
+
+
+def promoted_counts(run: Run) -> dict[int, int]:
+    """For each iteration (with a full fit or a screen), how many screens were promoted to a
+    full fit."""
+    counts = dict.fromkeys(_iterations(run), 0)
+    for candidate in run.screens():
+        counts[candidate.iteration] += candidate.promoted
     return counts
 
 
@@ -78,26 +97,55 @@ def plot_best_loss(run: Run, path: Path, loss_label: str) -> Path:
     return save(figure, path)
 
 
-def plot_outcomes(run: Run, path: Path) -> Path:
-    """Stacked bars: the candidates of each iteration by outcome."""
+def _stack(
+    axes: Axes, xs: list[float], counts: list[dict[str, int]], width: float, hatch: str = ""
+) -> None:
+    """Stacked bars at ``xs``, one per ``counts`` (by status), in the statuses' colours."""
+    bottom = [0] * len(xs)
+    for status in STATUSES:
+        heights = [count[status] for count in counts]
+        if any(heights):
+            axes.bar(xs, heights, bottom=bottom, color=STATUS_COLOURS[status], width=width,
+                     hatch=hatch, edgecolor="white" if hatch else None)  # fmt: skip
+            bottom = [b + h for b, h in zip(bottom, heights, strict=True)]
+
+
+def outcomes_figure(run: Run) -> Figure:
+    """Stacked bars: the candidates of each iteration by outcome; in a multi-fidelity search,
+    two per iteration: its screens (hatched, left) and its full fits (right)."""
     counts = outcome_counts(run)
     iterations = list(counts)
     figure = new_figure(7.0, 4.0)
     axes = figure.add_subplot()
-    bottom = [0] * len(iterations)
-    for status in STATUSES:
-        heights = [counts[i][status] for i in iterations]
-        if any(heights):
-            axes.bar(iterations, heights, bottom=bottom, color=STATUS_COLOURS[status],
-                     label=status, width=0.7)  # fmt: skip
-            bottom = [b + h for b, h in zip(bottom, heights, strict=True)]
+    shown = [counts[i] for i in iterations]
+    kinds: list[Patch] = []  # what tells the two bars of an iteration apart
+    if run.screens():
+        by_iteration = outcome_counts(run, screens=True)
+        screens = [by_iteration[i] for i in iterations]
+        _stack(axes, [i - 0.2 for i in iterations], screens, 0.38, hatch="///")
+        _stack(axes, [i + 0.2 for i in iterations], shown, 0.38)
+        shown += screens
+        kinds = [Patch(facecolor="white", edgecolor="#555555", hatch="///", label="screens"),
+                 Patch(facecolor="white", edgecolor="#555555", label="full fits")]  # fmt: skip
+        title = "screens (hatched) and full fits per iteration"
+    else:
+        _stack(axes, iterations, shown, 0.7)
+        title = "evaluation outcomes per iteration"
     axes.set_xticks(iterations)
     axes.set_xlabel("iteration (0 = seed)")
     axes.set_ylabel("candidates (count)")
     axes.yaxis.get_major_locator().set_params(integer=True)
-    axes.set_title(f"{run.task}: evaluation outcomes per iteration")
-    axes.legend(title="outcome", loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    return save(figure, path)
+    axes.set_title(f"{run.task}: {title}")
+    outcomes = [Patch(color=STATUS_COLOURS[status], label=status) for status in STATUSES
+                if any(count[status] for count in shown)]  # fmt: skip
+    axes.legend(handles=[*outcomes, *kinds], title="outcome", loc="upper left",
+                bbox_to_anchor=(1.01, 1.0))  # fmt: skip
+    return figure
+
+
+def plot_outcomes(run: Run, path: Path) -> Path:
+    """Draw :func:`outcomes_figure` into ``path``."""
+    return save(outcomes_figure(run), path)
 
 
 def evaluated_in_order(run: Run) -> list[Candidate]:
@@ -193,7 +241,38 @@ def curves_size(candidates: list[Candidate]) -> tuple[float, float]:
     return CURVES_WIDTH, CURVES_ROW_HEIGHT * max(1, len(candidates))
 
 
-def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Path:
+#: A series of at most this many points has each value written above its marker.
+LABELLED_POINTS = 2
+
+
+def draw_series(axes: Axes, values: list[float], colour: str) -> None:
+    """``values`` against their index (epochs), on integer epochs. A fit that stopped after one
+    or two evaluations gets each value written above its marker and an epoch axis of two
+    epochs (matplotlib's default around a lone point runs from -0.05 to 0.05); one whose values
+    are all equal gets its value written once and y-limits 10% either side of it."""
+    axes.plot(range(len(values)), values, "-o", markersize=3, color=colour)
+    axes.xaxis.set_major_locator(MaxNLocator(integer=True))
+    finite = [value for value in values if math.isfinite(value)]
+    if not finite:
+        return
+    low, high = min(finite), max(finite)
+    if len(values) <= LABELLED_POINTS:
+        axes.set_xlim(-0.5, LABELLED_POINTS - 0.5)  # room for the labels right of the markers
+        labelled = list(range(len(values)))
+    else:
+        labelled = [0] if low == high else []
+    if low == high:  # one value, however many points: a span around it
+        pad = 0.1 * abs(low) or 1.0
+        axes.set_ylim(low - pad, high + pad)
+    elif labelled:
+        axes.margins(y=0.25)  # room for the top marker's label below the frame
+    for index in labelled:
+        if math.isfinite(values[index]):
+            axes.annotate(f"{values[index]:.4g}", (index, values[index]), xytext=(-4, 6),
+                          textcoords="offset points", fontsize=9, color=colour)  # fmt: skip
+
+
+def curves_figure(candidates: list[Candidate], loss_label: str) -> Figure:
     """One row per candidate: its loss over epochs, then its first parameters over epochs."""
     figure = new_figure(*curves_size(candidates))
     columns = 1 + MAX_PARAMETER_PANELS
@@ -201,7 +280,7 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
     for row, candidate in enumerate(candidates):
         losses = candidate.curves.get("loss", [])
         axes = figure.add_subplot(grid[row, 0])
-        axes.plot(range(len(losses)), losses, "-o", markersize=3, color="#264653", label="loss")
+        draw_series(axes, losses, "#264653")
         if losses and min(losses) > 0 and max(losses) > LOG_SPAN * min(losses):
             axes.set_yscale("log")
             axes.yaxis.set_minor_formatter(NullFormatter())
@@ -212,9 +291,8 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
         axes.set_xlabel("epoch")
         names = [name for name in candidate.curves if name != "loss"]
         for column, name in enumerate(names[:MAX_PARAMETER_PANELS], start=1):
-            values = candidate.curves[name]
             axes = figure.add_subplot(grid[row, column])
-            axes.plot(range(len(values)), values, "-o", markersize=3, color="#2a9d8f")
+            draw_series(axes, candidate.curves[name], "#2a9d8f")
             axes.ticklabel_format(axis="y", useOffset=False)  # an offset text hits the title
             axes.set_title(name, loc="left")
             axes.set_xlabel("epoch")
@@ -228,4 +306,9 @@ def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Pat
     hidden = any(len(c.curves) - 1 > MAX_PARAMETER_PANELS for c in candidates)
     note = f"; first {MAX_PARAMETER_PANELS} parameters shown, all in curves.json" if hidden else ""
     figure.suptitle(f"Inner-loop optimisation of the top distinct solutions\n{loss_label}{note}")
-    return save(figure, path)
+    return figure
+
+
+def plot_curves(candidates: list[Candidate], path: Path, loss_label: str) -> Path:
+    """Draw :func:`curves_figure` into ``path``."""
+    return save(curves_figure(candidates, loss_label), path)

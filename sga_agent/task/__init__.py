@@ -20,8 +20,9 @@ forge its score:
 
 Its modules: :mod:`.records` (settings, evaluations, prompt parts, assessments, parents),
 :mod:`.protocol` (:class:`Task`, :class:`TaskBase`, :class:`BuiltinProposer`), :mod:`.code`
-(reading a solution's code without running it: :class:`CodeRejected`) and :mod:`.report` (the
-blocks a task's report sections are made of). A task package imports nothing else of
+(reading a solution's code without running it: :class:`CodeRejected`), :mod:`.progress` (the
+optional progress notes of a fit: :func:`report_progress`) and :mod:`.report` (the blocks a
+task's report sections are made of). A task package imports nothing else of
 ``sga_agent``, and this package imports nothing beyond the standard library, so that task
 packages can import it cheaply.
 """
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 from sga_agent.task.code import CodeRejected, Problem
 from sga_agent.task.memory import release_freed_memory
+from sga_agent.task.progress import FitProgress, progress_to, report_progress
 from sga_agent.task.protocol import (
     BuiltinProposer,
     Task,
@@ -66,8 +68,9 @@ from sga_agent.task.report import (
 
 __all__ = [
     "DPI", "FONT", "STATUSES", "Assessment", "Block", "BuiltinProposer", "CandidateRecord",
-    "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "Image", "InvalidSolution",
-    "NoOptions", "Parent", "Problem", "PromptParts", "ReportView", "Section", "Table", "Task",
-    "TaskBase", "TaskKind", "Text", "as_task", "configured", "is_out_of_memory",
-    "options_type", "release_freed_memory", "solution_with_parameters",
+    "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "FitProgress", "Image",
+    "InvalidSolution", "NoOptions", "Parent", "Problem", "PromptParts", "ReportView", "Section",
+    "Table", "Task", "TaskBase", "TaskKind", "Text", "as_task", "configured",
+    "is_out_of_memory", "options_type", "progress_to", "release_freed_memory",
+    "report_progress", "solution_with_parameters",
 ]  # fmt: skip

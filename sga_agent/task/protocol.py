@@ -56,7 +56,13 @@ class Task(Protocol):
 
     def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
         """Check the captured ``data`` and score it; never runs solution code, never raises
-        for a bad candidate (its data is untrusted: check everything)."""
+        for a bad candidate (its data is untrusted: check everything).
+
+        Optional: as its fit goes it may call :func:`~sga_agent.task.report_progress` (a stage
+        starting, each epoch finished with its loss), which a fit worker passes on to the
+        progress display of ``sga-agent evaluate`` and of the search; informational only,
+        and a no-op where nobody listens. A task that never calls it works as well.
+        """
         ...
 
 
@@ -130,6 +136,14 @@ class TaskBase:
         of a search, reports); it must not run the solution's code. Default: unchanged."""
         return solution
 
+    def parameter_units(self, solution: str, names: Sequence[str]) -> dict[str, str]:
+        """The units of the quantities ``names`` stand for in ``solution``, by name, for people
+        to read (``sga-agent evaluate``, the end of a search): ``{"friction_angle": "deg"}``.
+        A name is a parameter's natural name (``friction_angle`` for ``log_friction_angle``,
+        shown as its exp: :mod:`sga_agent.natural_units`); one left out is shown without a
+        unit. It must not run the solution's code. Default: {} (no unit known)."""
+        return {}
+
     def with_options(self, options: Any) -> TaskBase:
         """The task set up for a run's ``options`` (an :attr:`options_type` object) where its
         seed, prompt or built-in proposer depend on them (a task whose data is a file named by
@@ -152,7 +166,8 @@ class TaskBase:
         object) its evaluations will use: load data, compile kernels; it runs no candidate
         code. An iterator (a generator yielding between stages) is run in stages, the most
         needed first, none starting while a candidate waits (see :mod:`sga_agent.fit_worker`).
-        Default: nothing to warm."""
+        It may report its stages (:func:`~sga_agent.task.report_progress`), as ``evaluate``
+        may. Default: nothing to warm."""
         return None
 
     # ------------------------------------------------------------------ findings

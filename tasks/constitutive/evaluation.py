@@ -21,7 +21,7 @@ from bridges import laws as torch_laws
 from bridges import products
 from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory
+from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory, report_progress
 from taichi_mpm import runtime
 from tasks.constitutive import feedback, fidelity, law_kernel
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
@@ -95,6 +95,7 @@ def warm_up(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> Iterator[No
     ensure_runtime(options.precision or "float32")
     dtype = torch_dtype()
     observed = ground_truth(spec, options.steps)
+    report_progress("warming up: compiling the simulator's kernels")
     segments, segment = min(len(observed.states["x"]), 5), 2
     steps = min(segments * segment, observed.positions.shape[0] - 1)
     scene = tm.paper_scene(steps=steps)
@@ -203,6 +204,7 @@ def compile_law(law: GraphLaw, observed: Trajectory, options: ConstitutiveOption
     kernels = law_kernels_for(options.law_kernels, fidelity)
     if kernels == "none":
         return
+    report_progress("compiling the law")
     F = observed_deformations(observed, torch_dtype())
     svd, factored = kernels == "all", kernels == "svd-inputs"
     law.use_kernels(law_kernel.kernel_law(law, F, svd=svd, factored=factored))

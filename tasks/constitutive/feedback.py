@@ -31,15 +31,24 @@ def corner_particles(positions: np.ndarray, count: int = CORNERS) -> list[int]:
     return [int(np.argmax(centred @ np.array(sign, float))) for sign in signs[:count]]
 
 
-def _sampled(values: list[float], points: int = CURVE_POINTS) -> list[tuple[int, float]]:
-    if len(values) <= points:
-        return list(enumerate(values))
-    picks = evenly_spaced(0, len(values) - 1, points)
-    return [(int(i), values[i]) for i in picks]
+def listed_epochs(epochs: int, best: int, points: int = CURVE_POINTS) -> list[int]:
+    """The epochs a curve lists: every one when there are ``points`` or fewer, else ``points``
+    evenly spread from the first to the last, and always the ``best`` one (the feedback names
+    its value, so the list must show it).
+
+    >>> listed_epochs(30, 25)
+    [0, 3, 6, 10, 13, 16, 19, 23, 25, 26, 29]
+    """
+    if epochs <= points:
+        return list(range(epochs))
+    picks = {int(i) for i in evenly_spaced(0, epochs - 1, points)}
+    if 0 <= best < epochs:
+        picks.add(best)
+    return sorted(picks)
 
 
-def _curve(values: list[float]) -> str:
-    return ", ".join(f"{i}: {value:.4g}" for i, value in _sampled(values))
+def _curve(values: list[float], epochs: list[int]) -> str:
+    return ", ".join(f"{i}: {values[i]:.4g}" for i in epochs if i < len(values))
 
 
 #: What the loss of the constitutive tasks is, as the feedback names it.
@@ -49,6 +58,7 @@ LOSS = "mean squared position error over all steps, m^2"
 def optimization_text(result: InnerResult, settings: InnerSettings, loss: str = LOSS) -> str:
     """Loss and parameter curves with their best values; ``loss`` says what the loss is."""
     epochs = len(result.losses)
+    listed = listed_epochs(epochs, result.best_epoch)
     lines = []
     if not result.parameters:
         lines.append(
@@ -57,23 +67,24 @@ def optimization_text(result: InnerResult, settings: InnerSettings, loss: str = 
         )
     else:
         lines += [
-            f"Inner optimization: {_optimizer(settings)} over {epochs} evaluations of the "
-            "whole trajectory.",
-            f"Loss ({loss}), by epoch: "
-            f"{_curve(result.losses)}",
+            f"Inner optimization: {_optimizer(settings)} over {epochs} "
+            f"{'evaluation' if epochs == 1 else 'evaluations'} of the whole trajectory.",
+            f"Loss ({loss}), by epoch: {_curve(result.losses, listed)}",
             f"Best loss {result.best_loss:.6g} at epoch {result.best_epoch}.",
             "Parameters by epoch (the value at the best epoch is kept):",
         ]
         best = result.best_parameters
         for name, values in list(result.parameters.items())[:PARAMETERS_LISTED]:
-            lines.append(f"- {name}: {_curve(values)}; best {best[name]:.6g}")
+            lines.append(f"- {name}: {_curve(values, listed)}; best {best[name]:.6g}")
         hidden = len(result.parameters) - PARAMETERS_LISTED
         if hidden > 0:
-            lines.append(f"- ... and {hidden} more parameter values (not listed)")
-    if result.rejected_trials:
+            noun = "value" if hidden == 1 else "values"
+            lines.append(f"- ... and {hidden} more parameter {noun} (not listed)")
+    if rejected := len(result.rejected_trials):
+        points, were = ("trial point", "was") if rejected == 1 else ("trial points", "were")
         lines.append(
-            f"{len(result.rejected_trials)} trial points of the line search were rejected (not "
-            f"among the epochs above), the first at {result.rejected_trials[0]}."
+            f"{rejected} {points} of the line search {were} rejected (not among the epochs "
+            f"above), the first at {result.rejected_trials[0]}."
         )
     if result.stopped:
         lines.append(f"The optimization stopped early at {result.stopped}.")

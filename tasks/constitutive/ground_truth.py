@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import taichi_mpm as tm
+from sga_agent.task import report_progress
 from taichi_mpm import runtime
 
 #: Bump when the simulator's results change, so old cache files are not reused.
@@ -109,6 +110,7 @@ def load_or_generate(
                                                          data["reset_steps"], states))
     except (OSError, KeyError, ValueError):
         pass  # missing, damaged or altered: regenerate
+    report_progress(f"simulating the ground truth of {name} (first use)")
     trajectory = generate(material, scene, reset_every)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(f".{os.getpid()}.tmp.npz")

@@ -3,7 +3,8 @@
 Adam on every trainable parameter of the searched law, the gradient norm clipped, one epoch
 being one teacher-forced rollout of the whole scene (forward and segment-wise backward). The
 parameters of the best epoch are kept. A non-finite loss or gradient stops the optimization
-with its reason; what was found before it stands.
+with its reason; what was found before it stands. Each finished epoch is reported
+(:func:`~sga_agent.task.report_progress`: "fitting", epoch i of N, its loss).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from bridges.rollout import (
     segments_per_batch,
     trajectory_loss,
 )
-from sga_agent.task import release_freed_memory
+from sga_agent.task import release_freed_memory, report_progress
 from tasks.constitutive.adam import Adam
 from tasks.constitutive.ground_truth import Trajectory
 
@@ -121,9 +122,11 @@ def optimize(
         if name in unused:
             parameter.requires_grad_(False)  # no gradient can reach it
     trainable = [p for p in law.parameters() if p.requires_grad]
-    fit = _Fit(rollout, law, observed, settings)
+    once = not trainable or settings.epochs == 0
+    fit = _Fit(rollout, law, observed, settings, total=1 if once else settings.epochs + 1)
     fit.result.unused = unused
-    if not trainable or settings.epochs == 0:
+    report_progress("fitting", 0, fit.total)
+    if once:
         if fit.score(backward=False) is None:
             fit.result.stopped = fit.failure
     elif settings.optimizer == "lbfgs":
@@ -159,12 +162,19 @@ def unused_parameters(law: nn.Module) -> list[str]:
 
 
 class _Fit:
-    """Scores the law's current parameters, one epoch each, and remembers the best."""
+    """Scores the law's current parameters, one epoch each (of at most ``total``), and remembers
+    the best."""
 
     def __init__(
-        self, rollout: Rollout, law: nn.Module, observed: Trajectory, settings: InnerSettings
+        self,
+        rollout: Rollout,
+        law: nn.Module,
+        observed: Trajectory,
+        settings: InnerSettings,
+        total: int,
     ) -> None:
         self.rollout, self.law, self.observed, self.settings = rollout, law, observed, settings
+        self.total = total
         self.result = InnerResult(parameters={name: [] for name in scalar_parameters(law)})
         self.best_state = copy.deepcopy(law.state_dict())
         self.failure = ""  # why the last score was None
@@ -204,6 +214,7 @@ class _Fit:
             result.best_epoch, result.best_loss, result.positions = epoch, run.loss, run.positions
             self.best_state = copy.deepcopy(self.law.state_dict())
         result.seconds.append(time.perf_counter() - started)
+        report_progress("fitting", self.epochs_done, self.total, run.loss)
         bad = _non_finite_gradient(self.law) if backward else ""
         if bad:
             self.failure = f"epoch {epoch}: the gradient of {bad} is not finite"

@@ -8,7 +8,7 @@ graph (in the trusted fit worker, which never runs the law's code).
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
@@ -41,6 +41,8 @@ class ConstitutiveTask(TaskBase):
     loss_label = report.LOSS_LABEL
     #: Whether the report draws the observation beside the best law's free run.
     draws_motion = True
+    #: Whether the scenes are in SI units, so that a modulus or a stress is in Pa.
+    si_units = True
     #: What the capture server loads before it confines a capture (see law_capture).
     capture_modules = ("numpy", "torch", "torch.nn", "torch.nn.functional", "torch.linalg",
                        "tasks.constitutive.law_capture")  # fmt: skip
@@ -111,6 +113,13 @@ class ConstitutiveTask(TaskBase):
             if not line.startswith(GENOME_TAG) and not (tag_above and not line.strip()):
                 kept.append(line)  # the tag goes with the blank line that sets it off
         return with_fitted_values("".join(kept), parameters)
+
+    def parameter_units(self, solution: str, names: Sequence[str]) -> dict[str, str]:
+        """Pa for a modulus or a stress (with :attr:`si_units`), an angle's unit as the law's
+        code uses it (see :mod:`tasks.constitutive.units`)."""
+        from tasks.constitutive.units import parameter_units
+
+        return parameter_units(solution, names, si=self.si_units)
 
     def provenance(self, options: ConstitutiveOptions) -> dict[str, Any]:
         """The ground truth in words, with its values."""

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from sga_agent.task import report_progress
 from tasks.molecules.calibration import PROPERTIES, normalized_property
 from tasks.molecules.constants import (
     DEFAULT_LEARNING_RATE,
@@ -153,6 +154,7 @@ def run_inner_loop(
                 energy=float(point.energy.detach()),
             )
         )
+        report_progress("optimizing the geometry", step + 1, steps + 1)
         if last:
             break
         loss = (value - objective.target) ** 2

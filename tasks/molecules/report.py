@@ -83,6 +83,24 @@ def summary_blocks(view: ReportView) -> list:
             molecules_table(molecules)]  # fmt: skip
 
 
+def screen_lines(findings: dict[str, Any]) -> list[str]:
+    """The best molecule (SMILES) and its property: in Hartree and eV on the QM9 scale, and
+    normalized (in QM9 standard deviations from the QM9 mean) against the target; none when
+    the run's facts name no molecule."""
+    molecules = [m for m in findings.get("molecules") or [] if isinstance(m, dict)]
+    best = (findings.get("best") or {}).get("candidate")
+    # the best's own facts, else the first distinct molecule's (the best's, under another id)
+    found = next((m for m in molecules if m.get("candidate") == best), None)
+    m = found or (molecules[0] if molecules else None)
+    if m is None or "smiles" not in m or "normalized" not in m:
+        return []
+    line = f"its {m.get('property', 'property')}: "
+    if m.get("hartree") is not None and m.get("ev") is not None:
+        line += f"{m['hartree']:+.4f} Ha ({m['ev']:+.2f} eV) on the QM9 B3LYP scale, "
+    line += f"{m['normalized']:+.3f} normalized (target {m.get('target', 0.0):+g})"
+    return [f"best molecule (SMILES): {m['smiles']}", line]
+
+
 def pictures_section(view: ReportView) -> Section:
     """2D depictions of the top molecules; a SMILES RDKit cannot read only loses the picture."""
     title = f"Top {TOP} molecules"

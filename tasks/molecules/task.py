@@ -118,6 +118,10 @@ class MoleculeTask(TaskBase):
         """Each top molecule's property on the QM9 scale and its distance to the target."""
         return report.top_facts(candidates)
 
+    def screen_lines(self, findings: dict[str, Any]) -> list[str]:
+        """The best molecule's SMILES and its property (normalized, in Hartree and eV)."""
+        return report.screen_lines(findings)
+
     def summary_blocks(self, view: ReportView) -> list[Block]:
         """The table of the top molecules."""
         return report.summary_blocks(view)

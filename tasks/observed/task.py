@@ -29,6 +29,7 @@ class ObservedTask(ConstitutiveTask):
 
     options_type = ObservedOptions
     loss_label = "loss"  # the observation's units are the file's
+    si_units = False  # so a modulus's unit is not known
     screens_cheaply = False  # its fit runs whole at any fidelity
 
     def __init__(self, options: ObservedOptions | None = None) -> None:

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from sga_agent.task import Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import Evaluation, EvaluationSettings, PromptParts, report_progress
 
 
 @dataclass(frozen=True)
@@ -115,6 +115,21 @@ class FailingWarmUpTask(ExecTask):
 
     def warm_up_fit(self, options: DoubleOptions) -> None:
         raise RuntimeError("no data to load")
+
+
+class ReportingTask(ExecTask):
+    """:class:`ExecTask` whose fit reports its progress: ``settings.epochs`` epochs (default 3)
+    counting down to its loss, between malformed notes (a stage that is no text, a count that
+    is no integer, control characters, a stage far too long)."""
+
+    def evaluate(self, data: dict[str, Any], settings: EvaluationSettings) -> Evaluation:
+        epochs = 3 if settings.epochs is None else settings.epochs
+        report_progress(123)  # type: ignore[arg-type]
+        report_progress("fitting", loss="low")  # type: ignore[arg-type]
+        for epoch in range(1, epochs + 1):
+            report_progress("fitting", epoch, epochs, data["loss"] + epochs - epoch)
+            report_progress("\x1b[2J\rfit\x07 " + "x" * 500, epoch=True)  # type: ignore[arg-type]
+        return super().evaluate(data, settings)
 
 
 class ExecLawTask(ExecTask):

@@ -74,6 +74,8 @@ def test_the_table_has_a_row_per_candidate_with_its_answer_folded_in(tmp_path):
     folder = store.path / "report"
     md = (folder / "report.md").read_text()
     page = (folder / "report.html").read_text()
+    # the summary counts as the end screen does: the repeat left out, one screen in the singular
+    assert "- 4 evaluations (3 ok, 1 invalid) after 1 screen (1 unstable), proposer" in md
     table = md.split("## Candidates")[1].split("<details>")[0]
     rows = [line for line in table.splitlines() if line.startswith("| 0")]
     assert [row.split(" | ")[0] for row in rows] == [
@@ -82,29 +84,30 @@ def test_the_table_has_a_row_per_candidate_with_its_answer_folded_in(tmp_path):
     ]  # fmt: skip
     plan = ("Replace the volume term with a log barrier, so that the energy grows without bound "
             "as J goes to…")  # the item's wrapped lines joined # fmt: skip
-    assert rows[0] == "| 00-seed | 0 |  | ok |  | 100 | E=1.2e5, nu=0.31 |  |  |  |"
+    # the run has a screen: a screen column follows the loss, empty where none was made
+    assert rows[0] == "| 00-seed | 0 |  | ok |  | 100 |  | E=1.2e5, nu=0.31 |  |  |  |"
     assert rows[1] == (
-        "| 01-exploit-00 | 1 | 0.5 | ok |  | 5 | a=1, b=2e-7, c=-3, d=4.5e12, … | "
+        "| 01-exploit-00 | 1 | 0.5 | ok |  | 5 |  | a=1, b=2e-7, c=-3, d=4.5e12, … | "
         f"{plan} | 00-seed | [analysis](../candidates/01-exploit-00/analysis.md), "
         "[plan](../candidates/01-exploit-00/plan.md), "
         "[reasoning](../candidates/01-exploit-00/reasoning.md) |"
     )
     assert rows[2] == (
         "| 01-explore-00 | 1 | 1 | invalid, finish: length | rejected: the code defines no "
-        "top-level class 'Physics' | - |  |  | 00-seed, 01-x | read as |"
+        "top-level class 'Physics' | - |  |  |  | 00-seed, 01-x | read as |"
     )
     assert rows[3].startswith("| 01-explore-01 | 1 | 1 | ok | repeated an earlier law "
                               "(01-exploit-00) | 5 |")  # fmt: skip
-    assert rows[4] == "| 02-exploit-00 | 2 | 0.5 | ok |  | 2 |  |  |  |  |"
+    assert rows[4] == "| 02-exploit-00 | 2 | 0.5 | ok |  | 2 |  |  |  |  |  |"
     assert rows[5] == (
         "| 02-explore-00 | 2 | 1 | unstable (screen) | unstable: the stress is NaN at step N | "
-        "- |  |  | 01-exploit-00 |  |"
+        "- | unstable, not promoted |  |  | 01-exploit-00 |  |"
     )
     # the HTML folds the texts into the row, escaped
     html_rows = page.split('<table class="folded">')[1].split("</table>")[0].split("<tr>")[2:]
     assert len(html_rows) == 6
     assert (
-        "<td>01-exploit-00</td><td>1</td><td>0.5</td><td>ok</td><td></td><td>5</td>"
+        "<td>01-exploit-00</td><td>1</td><td>0.5</td><td>ok</td><td></td><td>5</td><td></td>"
         "<td>a=1, b=2e-7, c=-3, d=4.5e12, …</td>"
     ) in html_rows[1]
     assert (

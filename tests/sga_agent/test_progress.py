@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import math
 import re
 from concurrent.futures import Future
 
@@ -12,13 +13,15 @@ import pytest
 from rich.console import Console
 
 from sga_agent.causes import cause_of
-from sga_agent.cli.progress import SearchProgress, print_result
+from sga_agent.cli.progress import SearchProgress, failures_line, print_result
 from sga_agent.config import UNTIL_BUDGET, SearchConfig
 from sga_agent.events import CandidateEvaluated, CandidateScreened
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search, SearchResult, Totals
 from sga_agent.task import Evaluation
-from tasks.constitutive.task import ElasticTask
+from sga_agent.wording import counted
+from tasks.constitutive.task import ElasticTask, GranularTask
+from tasks.molecules.task import HomoTask
 from tests.sga_agent.test_search import LAW, FakeTask, Scripted, config
 
 WIDTHS = (80, 120)
@@ -159,7 +162,7 @@ def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
     store.append(CandidateScreened("01-explore-09", 0.2, unstable.to_dict()))
     screen = console(WIDTHS[-1])
     print_result(screen, store, result, False, ElasticTask(), cfg)
-    assert "3 evaluations (3 ok) after 1 screens (1 unstable)" in screen.export_text()
+    assert "3 evaluations (3 ok) after 1 screen (1 unstable)" in screen.export_text()
 
 
 def failing_run(tmp_path) -> tuple[RunStore, SearchResult, SearchConfig]:
@@ -216,3 +219,76 @@ def test_without_failures_no_causes_are_printed_and_json_lists_them(tmp_path, ca
     assert summary["causes"][0] == ["unstable: NaN stress at step N", 3]
     assert [count for _, count in summary["causes"]] == [3, 2, 1]
     assert summary["run"] == str(store.path)
+
+
+class Fitted:
+    """Evaluator double: the loss written in the code, and the given fitted ``parameters``."""
+
+    def __init__(self, parameters: dict[str, float]) -> None:
+        self.parameters = parameters
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        future: Future[Evaluation] = Future()
+        loss = float(re.search(r"loss ([-\d.e+]+)", solution).group(1))
+        future.set_result(Evaluation(True, loss, "fitted", parameters=dict(self.parameters)))
+        return future
+
+
+def final_screen(tmp_path, values, evaluator=None, task=None, findings=None) -> str:
+    """The final screen (120 columns) of a run whose answers have the losses ``values``, the
+    seed's being 100; ``findings`` stand in for what the run's end would have recorded."""
+    explore = len(values) - 1
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=explore, top_k=5),
+                              proposer="builtin")  # fmt: skip
+    store = RunStore.create(tmp_path, cfg, {})
+    answers = [LAW.format(value=value) for value in values]
+    result = Search(cfg, FakeTask(), Scripted(answers), evaluator or FittedScale(), store).run()
+    if findings is not None:
+        store.save_summary({**store.summary(), "findings": findings})
+    screen = console(WIDTHS[-1])
+    print_result(screen, store, result, False, task or ElasticTask(), cfg)
+    return screen.export_text()
+
+
+def test_a_loss_above_the_seed_s_reads_above_not_below(tmp_path):
+    findings = {"truth": "the true law", "truth_loss": 20.0, "best_over_truth": 0.5}
+    text = final_screen(tmp_path, [10.0, 200.0], findings=findings)
+    rows = {line.split("│")[2].strip(): line for line in text.splitlines() if "│" in line}
+    assert "10x below" in rows["01-exploit-00"]  # 100 / 10
+    assert "2.00x above" in rows["01-explore-00"] and "below" not in rows["01-explore-00"]
+    assert "equal" in rows["00-seed"]
+    assert "vs the seed's ┃" in text  # not "x below the seed": wrong for a ratio under 1
+    assert "best: 01-exploit-00, loss 10, 10x below the seed's 100" in text
+    # the truth's loss 20 is twice the best's 10: above it, not "0.5x below"
+    assert "ground truth: the true law; its loss 20, 2.00x above the best's" in text
+
+
+def test_the_fitted_values_are_shown_in_natural_units(tmp_path):
+    fitted = {"log_yield_stress": math.log(3e4), "log_friction_angle": math.log(0.5), "nu": 0.2}
+    text = final_screen(tmp_path, [10.0], Fitted(fitted), GranularTask())
+    # the law's code does not turn degrees into radians: its angle is in radians
+    assert "fitted, in natural units: yield stress 3e+04 Pa; friction angle 0.5 rad\n" in text
+    assert "its code, with the fitted constants written in:" in text
+
+
+def test_the_end_of_a_molecule_search_speaks_of_the_molecule_and_its_property(tmp_path):
+    fitted = {"property": 0.012, "strain_kcal_mol": 1.5}
+    molecule = {"candidate": "01-exploit-00", "smiles": "CC(=O)Nc1ccc(O)cc1",
+                "property": "HOMO", "normalized": 0.012, "target": 0.0, "distance": 0.012,
+                "hartree": -0.2399, "ev": -6.528, "loss": 10.0}  # fmt: skip
+    findings = {"best": {"candidate": "01-exploit-00"}, "molecules": [molecule]}
+    text = final_screen(tmp_path, [10.0], Fitted(fitted), HomoTask(), findings)
+    assert "best molecule (SMILES): CC(=O)Nc1ccc(O)cc1\n" in text
+    property_line = "its HOMO: -0.2399 Ha (-6.53 eV) on the QM9 B3LYP scale, +0.012 normalized"
+    assert property_line + " (target +0)\n" in text
+    assert "its code" not in text and "fitted constants" not in text
+    assert "as proposed, before its optimization:" in text
+    assert "fitted, in natural units" not in text  # no log_ parameter
+
+
+def test_counts_of_one_are_singular():
+    outcome = vars(Evaluation.invalid("no code in this answer"))
+    assert failures_line([outcome]).startswith("failures: 1 of 1 answer: ")
+    assert counted(1, "evaluation") == "1 evaluation"
+    assert counted(0, "evaluation") == "0 evaluations"
+    assert counted(2, "finished evaluation") == "2 finished evaluations"

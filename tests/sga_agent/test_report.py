@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import re
 import struct
@@ -11,15 +12,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from rich.console import Console
 
 from sga_agent.cli import main
 from sga_agent.config import PRESETS
 from sga_agent.heap import ranked_loss
-from sga_agent.report.plots import DPI, curves_size
+from sga_agent.report.data import Candidate, read_run
+from sga_agent.report.plots import DPI, curves_figure, curves_size, outcomes_figure
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
-from sga_agent.task import Assessment, Evaluation, as_task
+from sga_agent.task import STATUSES, Assessment, Evaluation, as_task
+from tests.sga_agent.test_fidelity import TwoFidelities
+from tests.sga_agent.test_fidelity import config as fidelity_config
+from tests.sga_agent.test_fidelity import law as fidelity_law
 from tests.sga_agent.test_search import LAW, FakeTask, LossInCode, Scripted, config
 
 
@@ -72,6 +78,8 @@ def test_report_has_every_section_and_figure(tmp_path):
     assert "**1** (02-exploit-00), **100x below** the seed's 100" in md
     assert "F * 1.0" in md and "feedback for loss 1.0" in md
     assert "| 1 | 2 | 0 | 0 | 1 | 0 | 0 | 0 | 3 |" in md  # iteration 1: 2 ok, 1 unstable
+    assert "- 7 evaluations (6 ok, 1 unstable) in " in md  # as the end screen counts them
+    assert "screen" not in md.split("## Feedback")[0].lower()  # no screens: none of their parts
     for name in ("zigzag.png", "progress.png", "best_loss.png", "outcomes.png", "curves.png"):
         assert f'<img src="{name}"' in page and f"]({name})" in md
     assert png_size(folder / "zigzag.png") == (9 * DPI, round(4.2 * DPI))
@@ -379,3 +387,96 @@ def test_a_report_says_what_changed_since_the_run_started(tmp_path, monkeypatch)
     assert "- **verdict**: the best law does not reproduce the motion" in md
     assert '**changed since the run started** (this report names what the run recorded ' \
         'then): observation_sha256: "aaaa" at the start, "bbbb" now' in md  # fmt: skip
+
+
+class UnstableScreens(TwoFidelities):
+    """The multi-fidelity evaluator double; a law whose screen loss is written as -1 blows up
+    in its screen."""
+
+    def submit(self, task, solution, settings, captured=None):
+        future = super().submit(task, solution, settings, captured)
+        if future.result().loss < 0:
+            future._result = Evaluation.invalid("the stress is NaN at step 12", status="unstable")
+        return future
+
+
+def test_a_multi_fidelity_report_shows_its_screens_as_the_end_screen_counts_them(tmp_path):
+    """The summary counts the screens beside the full fits in the end screen's words, the
+    outcomes section charts and tables them, and the candidate table says per candidate how
+    its screen ended and whether it was promoted to a full fit."""
+    from sga_agent.cli.progress import print_result
+    from tasks.constitutive.task import ElasticTask
+
+    cfg = fidelity_config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    unstable = {7.0, 8.0, 10.0}  # their screens blow up
+    losses = (9.0, 3.0, 7.0, 5.0, 8.0, 6.0) + (2.0, 4.0, 1.0, 10.0, 11.0, 9.0)  # 9 repeated
+    answers = [fidelity_law(v, -1 if v in unstable else None) for v in losses]
+    result = Search(cfg, FakeTask(), Scripted(answers), UnstableScreens(), store).run()
+    screen = Console(file=io.StringIO(), width=120, record=True, color_system=None)
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    said = re.search(r"\d+ evaluations \(.*?\) after \d+ screens \(.*?\)", screen.export_text())
+    # the repeat is not counted; promoted: the law of loss 3 in iteration 1, then those of 1
+    # and 2 (the only ones whose screens beat the best earlier screen, 3's)
+    assert said and said[0] == "4 evaluations (4 ok) after 11 screens (8 ok, 3 unstable)"
+
+    report = CliRunner().invoke(main, ["report", str(store.path), "--no-motion"])
+    assert report.exit_code == 0, report.output
+    md = (store.path / "report" / "report.md").read_text()
+    page = (store.path / "report" / "report.html").read_text()
+    summary = md.split("## Bilevel")[0]
+    assert f"- {said[0]} in " in summary
+    assert (
+        "- screens: candidates were screened by a short fit (0.2 of a full fit), whose loss "
+        "compares only with other screens'; **3 of the 11 screens** were promoted"
+    ) in summary
+    assert f"<li>{said[0]} in " in page and "<b>3 of the 11 screens</b>" in page
+    outcomes = md.split("## Outcomes per iteration")[1].split("## Candidates")[0]
+    assert "screens (hatched, left) and full fits (plain, right)" in outcomes
+    assert "| " + " | ".join(["iteration", *STATUSES, "screens", "promoted"]) + " |" in outcomes
+    assert STATUSES[:4] == ("ok", "invalid", "error", "unstable")
+    assert "| 1 | 4 | 0 | 0 | 2 | 0 | 0 | 0 | 6 | 1 |" in outcomes
+    assert "| 2 | 5 | 0 | 0 | 1 | 0 | 0 | 0 | 6 | 2 |" in outcomes  # the repeat counts here
+    seed_rows = [line for line in outcomes.splitlines() if line.startswith("| 0 |")]
+    assert len(seed_rows) == 1  # the seed's full fit; no screen row for iteration 0
+    table = md.split("## Candidates")[1].split("<details>")[0]
+    assert "| loss | screen | fitted |" in table
+    rows = {line.split(" | ")[0][2:]: line for line in table.splitlines() if line[2:4].isdigit()}
+    assert "| ok |  | 3 | 0.003 ok, promoted |" in rows["01-exploit-01"]
+    assert "| unstable (screen) | unstable: the stress is NaN at step N | - | unstable, not " \
+        "promoted |" in rows["01-explore-00"]  # fmt: skip
+    assert "| ok (screen) |  | 0.009 | 0.009 ok, not promoted |" in rows["01-exploit-00"]
+    assert "| ok |  | 100 |  |" in rows["00-seed"]  # fitted in full, never screened
+    assert "<td>3</td><td>0.003 ok, promoted</td>" in page
+
+    figure = outcomes_figure(read_run(store.path))
+    axes = figure.axes[0]
+    legend = [text.get_text() for text in axes.get_legend().get_texts()]
+    assert legend == ["ok", "unstable", "screens", "full fits"]
+    hatched = [bar for bar in axes.patches if bar.get_hatch()]
+    assert sum(bar.get_height() for bar in hatched) == 12  # every screen, the repeat too
+    assert sum(bar.get_height() for bar in axes.patches if not bar.get_hatch()) == 4
+
+
+@pytest.mark.parametrize("losses", [[0.37], [0.0], [0.5, 0.4], [2.0] * 5])
+def test_a_fit_of_one_or_two_evaluations_is_drawn_around_its_values(losses):
+    """A fit that stopped after one evaluation (or two, or whose loss never moved) is drawn as
+    markers with their values written above them, on integer epochs, with y-limits around
+    the values (not matplotlib's -0.05 to 0.05 around one point)."""
+    candidate = Candidate("01-exploit-00", "ok", losses[-1],
+                          curves={"loss": losses, "scale": [2.5e5] * len(losses)})  # fmt: skip
+    figure = curves_figure([candidate], "loss")
+    loss, scale = figure.axes[:2]
+    for axes, values in ((loss, losses), (scale, [2.5e5] * len(losses))):
+        low, high = axes.get_ylim()
+        assert low < min(values) and max(values) < high
+        assert high - low >= (0.1 * max(abs(v) for v in values) or 1.0)  # not 0.11 about 0
+        left, right = axes.get_xlim()
+        assert left < 0 and len(values) - 1 < right and right - left >= 1
+        shown = [tick for tick in axes.get_xticks() if left <= tick <= right]
+        assert shown and all(float(tick).is_integer() for tick in shown)  # epochs: 0, 1, ...
+        labels = [text.get_text() for text in axes.texts]
+        if len(values) <= 2:
+            assert labels == [f"{value:.4g}" for value in values]
+        else:  # all equal: the value once
+            assert labels == [f"{values[0]:.4g}"]

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from sga_agent import sandbox
-from sga_agent.helper_protocol import FitSettings
+from sga_agent.helper_protocol import NOTE, FitSettings
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.sandbox import (
     EvaluationSlot,
@@ -351,6 +351,13 @@ def _staged_fit_worker(notes: Path) -> tuple[subprocess.Popen, str]:
     return worker, request
 
 
+def _answer(worker: subprocess.Popen) -> dict:
+    """The worker's next answer, past its progress notes."""
+    while NOTE in (line := json.loads(worker.stdout.readline())):
+        pass
+    return line
+
+
 def _noted(notes: Path) -> list[str]:
     return notes.read_text().split() if notes.exists() else []
 
@@ -358,14 +365,14 @@ def _noted(notes: Path) -> list[str]:
 def test_a_waiting_candidate_goes_before_the_warm_up_stages_that_run_when_idle(tmp_path):
     notes = tmp_path / "stages"
     worker, request = _staged_fit_worker(notes)
-    first = json.loads(worker.stdout.readline())
+    first = _answer(worker)
     deadline = time.monotonic() + 30
     while _noted(notes) != ["1", "2", "3"]:
         assert time.monotonic() < deadline, "the warm-up did not run while the worker waited"
         time.sleep(0.05)
     worker.stdin.write(request)
     worker.stdin.flush()
-    second = json.loads(worker.stdout.readline())
+    second = _answer(worker)
     worker.stdin.close()
     assert worker.wait(timeout=30) == 0
     assert first["extras"]["stages_done"] == []
@@ -376,7 +383,7 @@ def test_warm_up_stages_not_reached_when_the_input_ends_are_skipped(tmp_path):
     notes = tmp_path / "stages"
     worker, _ = _staged_fit_worker(notes)
     worker.stdin.close()
-    assert json.loads(worker.stdout.readline())["extras"]["stages_done"] == []
+    assert _answer(worker)["extras"]["stages_done"] == []
     assert worker.wait(timeout=30) == 0
     assert not notes.exists()
 

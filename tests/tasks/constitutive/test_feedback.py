@@ -12,6 +12,7 @@ import pytest
 
 from tasks.constitutive import feedback
 from tasks.constitutive.feedback import CORNERS, TRAJECTORY_FRAMES, TRAJECTORY_ROWS
+from tasks.constitutive.inner import InnerResult, InnerSettings
 
 STEPS, DT = 200, 1e-3
 ROWS = CORNERS * TRAJECTORY_FRAMES
@@ -131,3 +132,31 @@ def _rows(lines: list[str]):
             particle = int(header[1])
         elif line.startswith("  t = "):
             yield particle, line
+
+
+def listed(line: str) -> list[int]:
+    """The epochs a curve line of the feedback lists (``"0: 1.2, 3: 0.9, ..."``)."""
+    return [int(epoch) for epoch in re.findall(r"(?:: |, )(\d+): ", line)]
+
+
+def test_the_epochs_listed_include_the_best_one_and_the_last():
+    epochs, best = 30, 25  # the paper's 30 epochs: 25 falls between the evenly spread ones
+    losses = [1.0 / (1 + e) if e <= best else 0.5 for e in range(epochs)]
+    result = InnerResult(losses=losses, parameters={"log_E": [13.0 + 0.01 * e for e in range(30)]},
+                         best_epoch=best, best_loss=losses[best])  # fmt: skip
+    lines = feedback.optimization_text(result, InnerSettings()).splitlines()
+    loss_line = next(line for line in lines if line.startswith("Loss ("))
+    parameter_line = next(line for line in lines if line.startswith("- log_E: "))
+    assert f"Best loss {losses[best]:.6g} at epoch {best}." in lines
+    for line in (loss_line, parameter_line):
+        assert best in listed(line) and listed(line)[-1] == epochs - 1 and listed(line)[0] == 0
+        assert listed(line) == sorted(set(listed(line)))
+    assert f"{best}: {losses[best]:.4g}" in loss_line
+    assert feedback.listed_epochs(8, 5) == list(range(8))  # few epochs: all of them
+
+
+def test_one_rejected_trial_point_is_singular():
+    result = InnerResult(losses=[2.0, 1.0], parameters={"a": [0.0, 1.0]}, best_epoch=1,
+                         best_loss=1.0, rejected_trials=["a=nan"])  # fmt: skip
+    text = feedback.optimization_text(result, InnerSettings(optimizer="lbfgs"))
+    assert "1 trial point of the line search was rejected" in text
