@@ -1,7 +1,7 @@
 """Taichi kernels of one MPM step on torch tensors, and their hand-written reverse.
 
-A Taichi launch costs ~25 us per torch-tensor argument on this CPU, more than the copy itself,
-so each step's particle data crosses in one packed (B * N, 33) torch tensor (``COL_*``: x, v,
+Each torch-tensor argument adds to a Taichi launch's cost, more than the copy itself costs, so
+each step's particle data crosses in one packed (B * N, 33) torch tensor (``COL_*``: x, v,
 C, F, stress in row-major order) and comes back in two: the (B * N, 15) motion (x, v, C) and
 the (B * N, 9) trial F, which the graph need not keep once the plastic law has read it. Torch
 tensors are passed straight to ``ti.types.ndarray`` arguments (zero copy on the CPU), and the

@@ -55,8 +55,13 @@ def shown(output: str) -> str:
     return "\n".join(lines).strip("\n") + "\n"
 
 
-def assert_shown_on_the_site(name: str, output: str) -> None:
-    """``output`` matches docs/outputs/NAME.txt, digits masked (values, times, dates vary)."""
+#: A number as a screen writes it: 3, 0.72, 2.1e-06, 6.16e+10.
+NUMBER = re.compile(r"\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+
+
+def assert_shown_on_the_site(name: str, output: str, numbers: bool = False) -> None:
+    """``output`` matches docs/outputs/NAME.txt, digits masked (values, times, dates vary);
+    with ``numbers``, each number masked whole (its digits may differ in count on another CPU)."""
     path = OUTPUTS / f"{name}.txt"
     text = shown(output)
     if UPDATE:
@@ -65,7 +70,7 @@ def assert_shown_on_the_site(name: str, output: str) -> None:
     recorded = path.read_text(encoding="utf-8")
 
     def mask(value: str) -> str:
-        return re.sub(r"\d", "#", value)
+        return NUMBER.sub("#", value) if numbers else re.sub(r"\d", "#", value)
 
     assert mask(text) == mask(recorded), (
         f"{path.relative_to(ROOT)} no longer shows what the example prints; if the change is "
@@ -111,6 +116,35 @@ def test_sysid_cube():
     fitted = float(re.search(r"yield_stress\s+(\S+)\s+\+-", output).group(1))
     assert abs(fitted / 2e3 - 1) < 0.05 and "all parameters identified" in output
     assert_shown_on_the_site("sysid_cube", output)
+
+
+@pytest.mark.slow
+def test_the_held_out_floors():
+    output = run([sys.executable, "-m", "tasks.constitutive.held_out"])
+    assert output.count("held-out free-run RMS error") == 5
+    command = "$ python -m tasks.constitutive.held_out\n"
+    assert_shown_on_the_site("held_out_floors", command + output, numbers=True)
+
+
+#: The short search of the tasks page, as written there.
+SHORT_ELASTIC_SEARCH = ["search", "--task", "elastic", "--option", "steps=200", "--iterations",
+                        "1", "--exploit", "1", "--explore", "1", "--epochs", "2", "--workers",
+                        "2"]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_short_elastic_search_of_the_tasks_page(tmp_path: Path):
+    """The page's command ends with the lines the page shows: the best's ratio to the seed and
+    the truth's, the verdict and the two free runs."""
+    command = " ".join(["sga-agent", *SHORT_ELASTIC_SEARCH])
+    assert command in " ".join((DOCS / "tasks.md").read_text("utf-8").replace("\\\n", " ").split())
+    output = run([sys.executable, "-m", "sga_agent", *SHORT_ELASTIC_SEARCH, "--out-dir",
+                  str(tmp_path)], env=environment(COLUMNS="400"))  # fmt: skip
+    parts = ("best:", "ground truth:", "verdict:", "free run of the best")
+    lines = [line.rstrip() for line in output.splitlines() if line.startswith(parts)]
+    assert len(lines) == 5, output
+    shown_lines = "\n".join(lines)
+    assert_shown_on_the_site("elastic_verdict", shown_lines, numbers=True)
 
 
 @pytest.mark.slow
