@@ -103,7 +103,7 @@ def capture_law(code: str) -> dict[str, Any]:
         document = serialize(traced, named, code)  # refuses operations not allowed first
     except LawCaptureError:  # traced again with each node's line, to name it in the refusal
         document = serialize(_trace(forward, F, values, lines=True), named, code)
-    _check_faithful(traced, law, F, values)
+    _check_faithful(traced, forward, F, values)
     return document
 
 
@@ -122,20 +122,23 @@ def _trace(
 
 
 def _check_faithful(
-    traced: fx.GraphModule, law: torch.nn.Module, F: torch.Tensor, values: list[torch.Tensor]
+    traced: fx.GraphModule, forward: Any, F: torch.Tensor, values: list[torch.Tensor]
 ) -> None:
-    """Refuse a graph that computes something else than the law, on the traced batch and on
-    one of another size (a value read out of a tensor through NumPy during the trace becomes a
-    wrong constant, silently; a size fixed at the trace breaks on another batch)."""
-    for batch in (F, _sample_deformation_gradients(CHECK_BATCH)):
+    """Refuse a graph that computes something else than the law ``forward(F, *values)``: on
+    the traced batch, on one of another size (a size fixed at the trace breaks there) and with
+    other parameter values (a value read out of a parameter through NumPy during the trace
+    becomes a constant, silently, which may even equal the value it was read from)."""
+    shifted = [value * 1.25 + 0.125 for value in values]
+    cases = [(F, values), (_sample_deformation_gradients(CHECK_BATCH), values), (F, shifted)]
+    for batch, parameters in cases:
         try:
             with torch.no_grad():
-                expected = law(batch)
+                expected = forward(batch, *parameters)
         except Exception:
             return  # the law itself fails on these F: the fit will say how, on the real ones
         try:
             with torch.no_grad():
-                actual = traced(batch, *values)
+                actual = traced(batch, *parameters)
         except Exception as error:
             raise LawCaptureError(
                 f"the recorded law fails on {len(batch)} particles ({describe_error(error)}): "
