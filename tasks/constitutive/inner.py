@@ -125,7 +125,7 @@ def optimize(
     once = not trainable or settings.epochs == 0
     fit = _Fit(rollout, law, observed, settings, total=1 if once else settings.epochs + 1)
     fit.result.unused = unused
-    report_progress("fitting", 0, fit.total)
+    report_progress("fitting", *fit.progress())
     if once:
         if fit.score(backward=False) is None:
             fit.result.stopped = fit.failure
@@ -184,6 +184,11 @@ class _Fit:
     def epochs_done(self) -> int:
         return len(self.result.losses)
 
+    def progress(self, epoch: int | None = None) -> tuple[int | None, int | None]:
+        """Epoch ``epoch`` (0: the starting values) of the fit's epochs, as progress notes
+        count them: the settings' epochs, none when the law is only scored."""
+        return (epoch, self.total - 1) if self.total > 1 else (None, None)
+
     def score(self, backward: bool) -> float | None:
         """The loss (gradients in ``.grad`` if ``backward``); None, with the reason in
         ``failure``, when the simulation or the gradient is not finite."""
@@ -214,7 +219,7 @@ class _Fit:
             result.best_epoch, result.best_loss, result.positions = epoch, run.loss, run.positions
             self.best_state = copy.deepcopy(self.law.state_dict())
         result.seconds.append(time.perf_counter() - started)
-        report_progress("fitting", self.epochs_done, self.total, run.loss)
+        report_progress("fitting", *self.progress(epoch), run.loss)
         bad = _non_finite_gradient(self.law) if backward else ""
         if bad:
             self.failure = f"epoch {epoch}: the gradient of {bad} is not finite"

@@ -179,7 +179,7 @@ def test_evaluate_shows_the_epochs_on_stderr_and_keeps_json_stdout(monkeypatch):
     assert json.loads(result.stdout)["valid"]  # stdout: the JSON alone
     lines = result.stderr.splitlines()
     assert re.match(r"capturing the solution \[0:00:0\d\]$", lines[0]), lines
-    assert re.match(r"fitting: epoch 3/3, loss \S+ \[0:\d\d:\d\d\]$", lines[-1]), lines
+    assert re.match(r"fitting: epoch 2/2, loss \S+ \[0:\d\d:\d\d\]$", lines[-1]), lines
 
 
 def test_on_a_terminal_evaluate_draws_one_live_line_of_the_fit():
