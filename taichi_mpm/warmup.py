@@ -9,6 +9,7 @@ current architecture and precision. ``taichi-mpm warmup`` does it from the shell
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -53,13 +54,25 @@ def warm_up(parallel: tuple[bool, ...] = (False, True)) -> float:
     ``parallel`` selects the loop variants to compile (serial: small scenes on the CPU,
     parallel: large scenes and GPUs).
     """
-    runtime.current()
     start = time.perf_counter()
+    for _ in warm_up_passes(parallel):
+        pass
+    return time.perf_counter() - start
+
+
+def warm_up_passes(parallel: tuple[bool, ...] = (False, True)) -> Iterator[str]:
+    """:func:`warm_up` one pass at a time: yields what the next pass is ("FixedCorotated +
+    VonMises, serial loops, backward"), then compiles (or loads) and runs it when asked for the
+    following one; two passes (forward, backward) per law and loop variant."""
+    runtime.current()
     positions, volume = cube((0.5, 0.5, 0.5), 0.2, 2)
     scene = Scene(positions, np.zeros_like(positions), volume, grid_resolution=8, steps=2)
     for mode in parallel:
+        loops = "parallel loops" if mode else "serial loops"
         for material in WARM_UP_MATERIALS:
+            law = f"{type(material.elastic).__name__} + {type(material.plastic).__name__}"
+            yield f"{law}, {loops}, forward"
             sim = Simulator(scene, material, parallel=mode)
             recorded = sim.forward([scene.steps])
+            yield f"{law}, {loops}, backward"
             sim.backward(np.ones_like(recorded))
-    return time.perf_counter() - start

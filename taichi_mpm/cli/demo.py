@@ -8,9 +8,11 @@ from pathlib import Path
 import click
 import numpy as np
 from rich.console import Console
+from rich.text import Text
 
 import taichi_mpm as tm
 from taichi_mpm.cli import arch_option, main, precision_option, start_taichi
+from taichi_mpm.cli.heartbeat import Heartbeat
 from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.render import render_frames
 
@@ -79,6 +81,8 @@ _DEMO_HELP = (
     "A cube of 1000 particles (side 0.5, density 1e3) is thrown spinning into a box with "
     "slip walls, on a 20^3 grid with dt = 5e-4 s. The materials are:\n\n\b\n"
     + "\n".join(f"  {name:<11} {text}" for name, text in MATERIALS.items())
+    + "\n\nWhile it works it shows what it does (the simulation, the picture): a live line on "
+    "a terminal, else, from 5 s on, a plain line on stderr every 5 s."
 )
 
 
@@ -121,12 +125,15 @@ def demo(material: str, steps: int, frames: int, out: Path, arch: str, precision
     step_indices = frame_steps(steps, frames)
 
     start = time.perf_counter()
+    heartbeat = click.get_current_context().with_resource(Heartbeat(active=not console.is_terminal))
+    heartbeat.state("starting Taichi")
     backend = start_taichi(console, arch, precision)
-    with console.status(
+    simulating = (
         f"Simulating [bold]{material}[/]: {scene.num_particles} particles, {steps} steps "
-        f"({backend}, {precision}); the first run compiles the kernels (about a minute)...",
-        spinner="dots",
-    ):
+        f"({backend}, {precision}); the first run compiles the kernels (about a minute)"
+    )
+    heartbeat.state(Text.from_markup(simulating).plain)
+    with console.status(f"{simulating}...", spinner="dots"):
         positions = tm.Simulator(scene, make_material(material)).forward(step_indices)
     simulated = time.perf_counter() - start
     if not np.isfinite(positions).all():
@@ -141,6 +148,7 @@ def demo(material: str, steps: int, frames: int, out: Path, arch: str, precision
         )
 
     titles = [f"t = {s * scene.dt:.3g} s" for s in step_indices]
+    heartbeat.state(f"Rendering {len(step_indices)} panels")
     with console.status(f"Rendering {len(step_indices)} panels...", spinner="dots"):
         try:
             written = render_frames(
@@ -153,6 +161,7 @@ def demo(material: str, steps: int, frames: int, out: Path, arch: str, precision
         except OSError as error:
             raise click.ClickException(f"could not write '{out}': {error}") from error
     total = time.perf_counter() - start
+    heartbeat.stop()
     console.print(
         f"[green]done:[/] {material}, {steps} steps ({steps * scene.dt:g} s simulated) in "
         f"{total:.1f} s wall ({simulated:.1f} s simulating)",

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import logging
+import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -12,6 +15,7 @@ from rich.console import Console
 
 import taichi_mpm as tm
 from taichi_mpm.cli import arch_option, main, precision_option, start_taichi
+from taichi_mpm.cli.heartbeat import Heartbeat
 from taichi_mpm.sysid.families import (
     FAMILIES,
     family_parameters,
@@ -25,8 +29,53 @@ _SYSID_HELP = (
     "scripts/make_observation.py writes synthetic ones). The material families are:\n\n\b\n"
     + "\n".join(f"  {name:<11} {text}" for name, text in FAMILIES.items())
     + "\n\nWrites fit.json (values, loss curve, history, warnings, relative standard "
-    "deviations) and comparison.png (observed vs fitted particles, loss curve) to --out-dir."
+    "deviations) and comparison.png (observed vs fitted particles, loss curve) to --out-dir. "
+    "While it works it shows its progress (each iteration's loss and values): a bar on a "
+    "terminal, else, from 5 s on, a plain line on stderr every 5 s."
 )
+
+#: The logger of the fits' progress lines (:class:`taichi_mpm.sysid.fit.Progress`).
+FIT_LOGGER = "taichi_mpm.sysid"
+#: A line of the fit logger for one iteration ("run 2/3: iteration 5: loss ...").
+_ITERATION = re.compile(r"(run \d+/\d+: )?iteration \d+:")
+
+
+def iteration_text(
+    run: int, runs: int, iteration: int, iterations: int, loss: float, values: dict[str, float]
+) -> str:
+    """One iteration of the fit in words: "fitting: iteration 7/200, loss 0.0001227,
+    yield_stress=1977" (with "run 2/3, " before the iteration when there are several runs)."""
+    shown = "".join(f", {name}={value:.4g}" for name, value in values.items())
+    which = f"run {run + 1}/{runs}, " if runs > 1 else ""
+    return f"fitting: {which}iteration {iteration}/{iterations}, loss {loss:.4g}{shown}"
+
+
+class FitPhases(logging.Handler):
+    """Tells ``show`` each phase the fits log (the start of a run, its end, the uncertainties'
+    simulations), not their iterations (the callback tells those, counted), while it is used as
+    a context manager: the fit logger then logs at INFO level at least."""
+
+    def __init__(self, show: Callable[[str], None]) -> None:
+        super().__init__(logging.INFO)
+        self.show = show
+        self.logger = logging.getLogger(FIT_LOGGER)
+        self.level_before = self.logger.level
+
+    def __enter__(self) -> FitPhases:
+        self.level_before = self.logger.level
+        if not self.logger.isEnabledFor(logging.INFO):
+            self.logger.setLevel(logging.INFO)
+        self.logger.addHandler(self)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.logger.removeHandler(self)
+        self.logger.setLevel(self.level_before)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        message = record.getMessage()
+        if not _ITERATION.match(message):
+            self.show(message)
 
 
 def _parse_guesses(ctx, param, values) -> dict[str, float]:
@@ -202,6 +251,10 @@ def sysid(
     except ValueError as error:  # a scene field out of range (SceneError, MaterialError)
         raise click.ClickException(f"'{observed}': {error}") from error
 
+    context = click.get_current_context()  # both end with the command
+    heartbeat = context.with_resource(Heartbeat(active=not console.is_terminal))
+    context.with_resource(FitPhases(heartbeat.state))
+    heartbeat.state("starting Taichi")
     backend = start_taichi(console, arch, precision)
     velocity = None
     if settings.fit_velocity:
@@ -212,6 +265,7 @@ def sysid(
         f"{backend}, {precision}, {settings.optimizer}, {restarts} run{'s' * (restarts > 1)})",
         soft_wrap=True,
     )
+    heartbeat.said()
 
     iterations = settings.iterations
     total = restarts * iterations
@@ -238,6 +292,7 @@ def sysid(
                 loss=f"{loss:.3e}",
                 values=shown,
             )
+            heartbeat.state(iteration_text(run, restarts, iteration, iterations, loss, current))
 
         try:
             result = identify(
@@ -255,6 +310,8 @@ def sysid(
         progress.update(task, completed=total, description="done")
     seconds = time.perf_counter() - start
     console.print(result.summary(), markup=False, soft_wrap=True)
+    heartbeat.said()
+    heartbeat.state("simulating the fitted motion")
 
     best = result.best
     scene = observation.scene
@@ -300,6 +357,7 @@ def sysid(
     }
     best_run = next(i for i, run in enumerate(result.runs) if run is best)
     title = f"{family}: " + ", ".join(f"{k} = {v:.4g}" for k, v in best.values.items())
+    heartbeat.state(f"writing fit.json and comparison.png to {out_dir}")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         json_path = out_dir / "fit.json"
@@ -315,6 +373,7 @@ def sysid(
         )
     except OSError as error:
         raise click.ClickException(f"could not write to '{out_dir}': {error}") from error
+    heartbeat.stop()
     console.print(
         f"[green]done[/] in {seconds:.1f} s; wrote {json_path} and {png_path}", soft_wrap=True
     )

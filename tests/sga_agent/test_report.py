@@ -480,3 +480,34 @@ def test_a_fit_of_one_or_two_evaluations_is_drawn_around_its_values(losses):
             assert labels == [f"{value:.4g}" for value in values]
         else:  # all equal: the value once
             assert labels == [f"{values[0]:.4g}"]
+
+
+def test_the_report_tells_each_stage_and_how_long_it_runs(tmp_path, monkeypatch):
+    """In a pipe, stderr names each stage as it starts, then (here at once; in use after each
+    5 s without a line, from the command's 5th second on) the running one with its time."""
+    from sga_agent.report import heartbeat
+
+    for name in ("GRACE_S", "EVERY_S"):
+        monkeypatch.setattr(heartbeat, name, 0.0)
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
+    Search(cfg, FakeTask(), Scripted(answers), CurvesAndFailures(), store).run()
+
+    result = CliRunner().invoke(main, ["report", str(store.path), "--no-motion"])
+    assert result.exit_code == 0, result.output
+    told = result.stderr.splitlines()
+    assert told[:1] == [f"reading the run in {store.path}..."]
+    assert "plotting the losses..." in told
+    assert re.search(r"^still reading the run in .+ \[0:00:0\d\]$", result.stderr, re.M), told
+    assert re.search(r"^still plotting the losses \[0:00:0\d\]$", result.stderr, re.M), told
+    assert result.stdout.splitlines()[0] == str(store.path / "report" / "report.md")
+
+
+def test_a_stage_in_short():
+    from sga_agent.cli.report import short
+
+    stage = "assessing the best solution: the true law's loss (cached after the first time)"
+    assert short(stage) == "assessing the best solution"
+    assert short("drawing the free run (training scene)") == "drawing the free run"
+    assert short("plotting the losses") == "plotting the losses"

@@ -286,13 +286,15 @@ def _retried(store: RunStore) -> int:
 def kill_busy_helpers(store: RunStore, stop: threading.Event, marks: Path,
                       kills: list[str]) -> None:  # fmt: skip
     """SIGKILL a random busy helper, again and again: each time once the previous kill's
-    candidate has been recorded (as retried), or after 15 s (it hit an idle moment)."""
+    candidate has been recorded (as retried), or after 15 s (it hit an idle moment). A kind of
+    helper not killed yet goes first (a capture is busy for a fraction of a second only)."""
     rng = random.Random(0)
-    while not stop.wait(rng.uniform(0.2, 0.6)):
+    while not stop.wait(rng.uniform(0.1, 0.3)):
         busy = _busy_helpers(marks)
         if not busy:
             continue
-        pid = rng.choice(sorted(busy))
+        unkilled = {pid: kind for pid, kind in busy.items() if kind not in kills}
+        pid = rng.choice(sorted(unkilled or busy))
         before = _retried(store)
         os.kill(pid, signal.SIGKILL)
         kills.append(busy[pid])

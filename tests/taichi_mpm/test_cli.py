@@ -118,3 +118,46 @@ def test_warmup_compiles_and_reports():
     assert result.exit_code == 0, result.output
     assert "compiled cpu float64 kernels" in result.output
     assert runtime.current().precision == "float64"
+
+
+def test_warmup_in_a_pipe_names_each_pass_i_of_n(monkeypatch, prompt_lines):
+    """What it compiles, law and pass, i of N: in a pipe (no live display) as plain lines."""
+    from taichi_mpm.cli import warmup
+
+    def passes():
+        yield from ("LinearElastic + NoPlasticity, serial loops, forward", "a second pass")
+
+    monkeypatch.setattr(warmup, "warm_up_passes", passes)
+    monkeypatch.setattr(warmup, "start_taichi", lambda console, arch, precision: "cpu")
+    result = CliRunner().invoke(main, ["warmup", "--precision", "float32"])
+    assert result.exit_code == 0, result.output
+    title = "compiling cpu float32 kernels"
+    assert sorted(result.output.splitlines()) == [  # a thread prints them: in its own time
+        "compiled cpu float32 kernels in 0.0 s",
+        f"{title}: 1/{warmup.PASSES} LinearElastic + NoPlasticity, serial loops, forward [0:00:00]",
+        f"{title}: 2/{warmup.PASSES} a second pass [0:00:00]",
+    ]
+
+
+def test_warmup_names_the_passes_warm_up_runs():
+    from taichi_mpm.cli import warmup
+    from taichi_mpm.warmup import WARM_UP_MATERIALS, warm_up_passes
+
+    names = [f"{type(m.elastic).__name__} + {type(m.plastic).__name__}" for m in WARM_UP_MATERIALS]
+    passes = warm_up_passes()
+    first = [next(passes) for _ in range(2)]  # runs the first law forward: seconds when cached
+    assert first == [f"{names[0]}, serial loops, forward", f"{names[0]}, serial loops, backward"]
+    assert warmup.PASSES == 16 == 2 * 2 * len(names)
+
+
+@pytest.mark.slow
+def test_demo_in_a_pipe_says_what_it_does(tmp_path, prompt_lines):
+    """No live display in a pipe: plain lines name the simulation and the picture."""
+    args = ["demo", "--steps", "20", "--frames", "2", "--out", str(tmp_path / "x.png")]
+    result = CliRunner().invoke(main, [*args, "--precision", "float64"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    simulating = [line for line in lines if line.startswith("Simulating plasticine: 1000 ")]
+    assert simulating and simulating[0].endswith("compiles the kernels (about a minute) [0:00:00]")
+    assert any(line.startswith("Rendering 2 panels [0:00:") for line in lines), result.output
+    assert "[bold]" not in result.output

@@ -225,3 +225,23 @@ def test_family_errors_name_the_valid_choices():
     for text in ("E", "=1", "E=x", "E=nan"):
         with pytest.raises(ValueError):
             parse_assignment(text)
+
+
+@pytest.mark.slow
+def test_sysid_in_a_pipe_tells_each_iteration_and_phase(observed, tmp_path, prompt_lines):
+    """No bar is drawn in a pipe: plain lines on stderr tell the iterations with their loss and
+    the phases (here at once; in use from 5 s on, one each 5 s); stdout stays as it was."""
+    args = ["sysid", str(observed), "--material", "neohookean", "--fit", "E", "--guess", "E=1e5",
+            "--optimizer", "lbfgs", "--lr", "0.5", "--iterations", "4", "--precision", "float64",
+            "--out-dir", str(tmp_path / "out")]  # fmt: skip
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    told = result.stderr.splitlines()
+    assert told[0] == "starting Taichi [0:00:00]", result.stderr
+    assert any(line.startswith("fitting E with lbfgs, at most 4 iterations") for line in told)
+    assert any(line.startswith("fitting: iteration 1/4, loss ") for line in told), told
+    assert any(line.startswith("uncertainties: 2 simulations around the best fit") for line in told)
+    assert any(line.startswith("writing fit.json and comparison.png to ") for line in told)
+    assert not any("Fitting" in line or "best loss" in line for line in told)
+    assert "fitting: iteration" not in result.stdout
+    assert "best loss" in result.stdout and "done" in result.stdout
