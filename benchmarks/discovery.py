@@ -9,6 +9,8 @@ truth", the loss a search that found the right form could reach. Usage::
 
     python benchmarks/discovery.py run --row granular --seed 0 [--budget 15m]
         [--tree ../before --label before]   # the search of another checkout
+    python benchmarks/discovery.py run --row granular --budget none --label default
+                                            # the task's default command, no option
     python benchmarks/discovery.py table    # the markdown table of the results file
     python benchmarks/discovery.py headroom --row observed-sand --scene thrown --steps 150
 
@@ -41,6 +43,8 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "discovery.jsonl"
 LAWS = ROOT / "examples" / "laws"
 OBSERVATIONS = Path.home() / ".cache" / "sga" / "discovery"
+#: ``--budget`` of a row that runs the task's default command: no budget, no option.
+DEFAULT_COMMAND = "none"
 
 
 @dataclass(frozen=True)
@@ -140,13 +144,17 @@ def truth_code(row: Row) -> str:
 
 
 def search(row: Row, options: dict[str, str], seed: int, budget: str, tree: Path) -> dict:
-    """One default search with the code of checkout ``tree``: its summary and wall time."""
+    """One default search with the code of checkout ``tree`` (with ``--time-budget budget``,
+    or the task's default command where ``budget`` is :data:`DEFAULT_COMMAND`): its summary
+    and wall time."""
     path = os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")])
     env = os.environ | {"PYTHONPATH": path}
-    # given explicitly: a checkout from before UNTIL_BUDGET stops after its preset's iterations
     command = [sys.executable, "-m", "sga_agent", "search", "--task", row.task, "--seed",
-               str(seed), "--time-budget", budget, "--iterations", str(UNTIL_BUDGET),
-               "--json"]  # fmt: skip
+               str(seed), "--json"]  # fmt: skip
+    if budget != DEFAULT_COMMAND:
+        # given explicitly: a checkout from before UNTIL_BUDGET stops after its preset's
+        # iterations
+        command += ["--time-budget", budget, "--iterations", str(UNTIL_BUDGET)]
     for key, value in options.items():
         command += ["--option", f"{key}={value}"]
     load = os.getloadavg()[0]
@@ -318,7 +326,8 @@ def main() -> None:
     run = commands.add_parser("run", help="search one row and append it to the results")
     run.add_argument("--row", required=True, choices=list(ROWS))
     run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--budget", default="15m", help="--time-budget of the search")
+    run.add_argument("--budget", default="15m", help="--time-budget of the search, or "
+                     f"{DEFAULT_COMMAND!r}: the task's default command, no option")  # fmt: skip
     run.add_argument("--tree", help="another checkout whose search runs (default: this one)")
     run.add_argument("--label", default="current", help="the column the row belongs to")
     probe = commands.add_parser("headroom", help="an observed row's seed over the noise floor "

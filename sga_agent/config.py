@@ -33,11 +33,11 @@ if TYPE_CHECKING:
 
 #: Iterations, top-K shown, exploit/explore offspring per iteration, bilevel on or off. All but
 #: "quick" are the columns of the paper's Table 1; "quick" is the default of the LLM-free
-#: built-in proposers: a short run (25 candidates, 5 inner epochs) that shows the pipeline,
-#: preferring the law with fewer constants where two are within 1 % a constant
+#: built-in proposers: a short run (4 iterations of 6 candidates, 5 inner epochs), preferring
+#: the law with fewer constants where two are within 1 % a constant
 #: (``benchmarks/discovery.py``, observed neo-Hookean: a three-constant law 0.07 % below the
 #: true form held out worse). The command line also screens its candidates where the task
-#: screens cheaply (:func:`quick_screening`).
+#: screens cheaply, after a wide opening with a built-in proposer (:func:`quick_screening`).
 PRESETS: dict[str, dict[str, Any]] = {
     "quick": {
         "iterations": 4, "top_k": 5, "exploit": 2, "explore": 4, "bilevel": True, "epochs": 5,
@@ -57,23 +57,45 @@ PRESETS: dict[str, dict[str, Any]] = {
 UNTIL_BUDGET = 1_000_000
 
 
-def quick_screening(preset: str, settings: dict[str, Any], screens_cheaply: bool) -> dict[str, Any]:
-    """The settings the ``quick`` preset adds to ``settings`` where they leave them unset: on
-    a task that screens cheaply and without a time budget, its 25 candidates are screened
-    (``multi``) at 0.2 of a fit and promoted below the K-th best earlier screen. A short
-    search needs its few full fits: with multi's own defaults (0.1, the bar at the best) the
-    README's main command ended at 1.60e-5 against 3.99e-6, in the same 55 s
-    (``benchmarks/search_speed.py``). A budgeted search fits every candidate in full unless
-    told otherwise (the discovery benchmark's rows were measured so); ``--fidelity multi``
-    there takes multi's defaults, which bought 6.7x the candidates in equal time
-    (``benchmarks/fidelity.py``)."""
+#: The opening of the quick preset's built-in search: as many answers as the constitutive
+#: tasks' genetic programming lists plastic forms (``enumeration.LISTED``), each screened at
+#: the task's ``opening_screen`` share of a fit, a tenth of each iteration's screens promoted
+#: (4 of the opening's 40; ``benchmarks/search_speed.py`` measures the command).
+QUICK_OPENING = 40
+OPENING_PROMOTE = 0.1
+
+
+def quick_screening(
+    preset: str,
+    settings: dict[str, Any],
+    screens_cheaply: bool,
+    opening_screen: float | None = None,
+) -> dict[str, Any]:
+    """The settings the ``quick`` preset adds to ``settings`` where they leave them unset, on
+    a task that screens cheaply and without a time budget.
+
+    With the task's built-in proposer (``opening_screen``: the task's screen fidelity for it)
+    and the preset's iterations, exploit and explore counts: a wide first iteration
+    (``opening``, the proposer's most likely forms), screens at ``opening_screen`` of a fit,
+    a tenth of each iteration's screens promoted below the K-th best earlier screen.
+    Otherwise (a model, or a search shaped by the command): its candidates screened at 0.2 of
+    a fit and promoted below the K-th best earlier screen (a short search needs its few full
+    fits: with multi's own defaults, 0.1 and the bar at the best, the main command of the
+    release before ended at 1.60e-5 against 3.99e-6 in the same time). A budgeted search
+    fits every candidate in full unless told otherwise (the discovery benchmark's rows were
+    measured so); ``--fidelity multi`` there takes multi's defaults, which bought 6.7x the
+    candidates in equal time (``benchmarks/fidelity.py``)."""
     fidelity = settings.get("fidelity")
     if preset != "quick" or settings.get("max_seconds") is not None or fidelity == "full":
         return {}
     if fidelity is None and not screens_cheaply:
         return {}
     rank = settings.get("top_k") or PRESETS[preset]["top_k"]
-    screening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": rank}
+    screening: dict[str, Any] = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": rank}
+    shaped = any(settings.get(name) is not None for name in ("iterations", "exploit", "explore"))
+    if opening_screen is not None and screens_cheaply and not shaped:
+        screening |= {"opening": QUICK_OPENING, "screen_fidelity": opening_screen,
+                      "promote": OPENING_PROMOTE}  # fmt: skip
     return {name: value for name, value in screening.items() if settings.get(name) is None}
 
 
@@ -136,6 +158,10 @@ class LoopConfig:
         rank by loss * (1 + parsimony) ** (fitted parameters), so of two laws a tenth of a
         percent apart (within the noise of an observation) the one with fewer constants leads.
         0 ranks by loss alone (the paper), in [0, 1).
+    opening : int
+        Explore answers of the first iteration when more than ``explore``: a wide first look
+        (the constitutive tasks' built-in proposer answers it with its list of likely forms,
+        :mod:`tasks.constitutive.gp.enumeration`); 0: the first iteration is like the others.
     """
 
     iterations: int = 5
@@ -149,10 +175,11 @@ class LoopConfig:
     promote: float = 0.25
     promote_rank: int | None = 1
     parsimony: float = 0.0
+    opening: int = 0
 
     def __post_init__(self) -> None:
         _at_least(self, ("iterations", "top_k"), 1, "at least 1")
-        _at_least(self, ("exploit", "explore"), 0, ">= 0")
+        _at_least(self, ("exploit", "explore", "opening"), 0, ">= 0")
         if self.offspring < 1:
             raise ConfigError("exploit + explore must be at least 1 (offspring per iteration)")
         for name in ("exploit_temperature", "explore_temperature"):
@@ -173,8 +200,21 @@ class LoopConfig:
 
     @property
     def offspring(self) -> int:
-        """Candidates proposed per iteration."""
+        """Candidates proposed per iteration (the first one may explore more: ``opening``)."""
         return self.exploit + self.explore
+
+    def explore_in(self, iteration: int) -> int:
+        """Explore answers asked in ``iteration``: ``opening`` in the first where it is more."""
+        return max(self.explore, self.opening) if iteration == 1 else self.explore
+
+    def offspring_in(self, iteration: int) -> int:
+        """Candidates proposed in ``iteration``."""
+        return self.exploit + self.explore_in(iteration)
+
+    @property
+    def candidates(self) -> int:
+        """Candidates of a search that runs every iteration, the seed included."""
+        return 1 + self.iterations * self.offspring + self.explore_in(1) - self.explore
 
 
 @dataclass(frozen=True)

@@ -240,7 +240,11 @@ class Search:
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
             tried = [self._answers[c]["text"] for c in sorted(self._answers)]
-            request = ProposalRequest(candidates, temperature, seed, parents, prompt, tried)
+            opening = iteration == 1 and self.loop.opening > self.loop.explore
+            request = ProposalRequest(
+                candidates, temperature, seed, parents, prompt, tried,
+                opening=opening and temperature == self.loop.explore_temperature,
+            )  # fmt: skip
             try:
                 new = list(self.proposer.propose(request))[: request.n]
             except ProposerError as error:
@@ -578,11 +582,12 @@ def _takes_progress(evaluator: Evaluator) -> bool:
 
 def slots_of(loop: LoopConfig, iteration: int) -> list[tuple[str, float]]:
     """(candidate id, temperature) of ``iteration``'s answers: its exploit slots, then its
-    explore slots."""
+    explore slots (the first iteration's may be its wider opening)."""
     return [
         (f"{iteration:02d}-exploit-{j:02d}", loop.exploit_temperature) for j in range(loop.exploit)
     ] + [
-        (f"{iteration:02d}-explore-{j:02d}", loop.explore_temperature) for j in range(loop.explore)
+        (f"{iteration:02d}-explore-{j:02d}", loop.explore_temperature)
+        for j in range(loop.explore_in(iteration))
     ]
 
 

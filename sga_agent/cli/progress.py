@@ -225,7 +225,7 @@ class SearchProgress:
         self.failed = sum(not e.valid for e in done)
         self.screened = set(recorded.screens)  # candidates done once screened (multi-fidelity)
         self.bounded = config.loop.iterations < UNTIL_BUDGET  # else the time budget ends it
-        total = 1 + config.loop.iterations * config.loop.offspring if self.bounded else None
+        total = config.loop.candidates if self.bounded else None
         description = "resuming" if done else "seed"
         completed = len(recorded.evaluations.keys() | recorded.screens.keys())
         self.bar = self.progress.add_task(
@@ -238,6 +238,7 @@ class SearchProgress:
         self._finished: set[str] = set()  # those of them that have finished
         self._notes: dict[str, FitProgress] = {}  # the latest note of each running one
         self._proposals = 0  # answers received in the running iteration
+        self._asked = config.loop.offspring  # answers the running iteration asks for
         self._started = time.monotonic()
         self.live = Live(console=console, get_renderable=self.renderable)
         self.plain = None if console.is_terminal else PlainLines(
@@ -323,6 +324,7 @@ class SearchProgress:
                 description += f"/{self.config.loop.iterations}"
             self.progress.update(self.bar, description=description)
             self._proposals = 0
+            self._asked = self.config.loop.offspring_in(event["iteration"])
             self._begin("proposing")
             return f"{description} ({self._tally()})"
         elif kind == ev.RunFinished.type:
@@ -372,7 +374,7 @@ class SearchProgress:
                        if c in self._notes and c not in self._finished]  # fmt: skip
             return len(self._finished), len(self._batch), "; ".join(running)
         if self._phase == "proposing":
-            return self._proposals, self.config.loop.offspring, ""
+            return self._proposals, self._asked, ""
         return 0, None, self.assessing if self._phase == "assessing" else ""
 
     def plain_state(self) -> str:
@@ -386,7 +388,7 @@ class SearchProgress:
                 what += f": {_PHASES[self._phase]} {completed}/{total} done"
                 what += f"; {status}" if status else ""
             elif self._phase == "proposing":
-                what += f": proposing ({self._proposals}/{self.config.loop.offspring} answers)"
+                what += f": proposing ({self._proposals}/{self._asked} answers)"
             elif self._phase == "assessing":
                 what += "; assessing the best solution"
             return f"{what} ({self._tally()}) [{clock(time.monotonic() - self._started)}]"

@@ -108,10 +108,11 @@ def from_preset(name: str) -> str:
               "cheaper fit and the best --promote share of each iteration's screens gets the "
               "full fit (only full fits are ranked and shown).")
 @click.option("--screen-fidelity", type=click.FloatRange(0, 1, min_open=True, max_open=True),
-              show_default=f"{default('screen_fidelity')}; 0.2 in quick without --time-budget",
+              show_default=f"{default('screen_fidelity')}; in quick without --time-budget: "
+              "with an opening, the task's opening screen (0.2 on elastic), else 0.2",
               help="The screen's share of the full fit's work (--fidelity multi).")
 @click.option("--promote", type=click.FloatRange(0, 1, min_open=True),
-              show_default=str(default("promote")),
+              show_default=f"{default('promote')}; 0.1 in quick with an opening",
               help="Share of an iteration's valid screens promoted to the full fit "
               "(--fidelity multi; rounded up, at least one), of those below the bar of "
               "--promote-rank.")
@@ -123,6 +124,11 @@ def from_preset(name: str) -> str:
               show_default="0.01 in quick, 0 in the other presets",
               help="Share of the loss a fitted parameter must win: solutions rank by loss * "
               "(1 + parsimony) ** parameters (0: by loss alone).")
+@click.option("--opening", type=click.IntRange(min=0),
+              show_default="40 in quick with the built-in proposer on a task that screens "
+              "cheaply, without --time-budget, --iterations, --exploit or --explore; else 0",
+              help="Explore answers of the first iteration, when more than --explore: a wide "
+              "first look (the built-in proposer of laws tries its most likely forms).")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
               help="Do not fit parameters: evaluate the proposed defaults.")
 @click.option("--epochs", type=click.IntRange(min=0), show_default="the task's; 5 in quick",
@@ -199,7 +205,9 @@ def search(
     options = typed_task_options(loaded, task_options, proposer)
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
-    settings |= quick_screening(preset, settings, as_task(loaded).screens_cheaply)
+    described = as_task(loaded)
+    opening_screen = described.opening_screen if builtin else None
+    settings |= quick_screening(preset, settings, described.screens_cheaply, opening_screen)
     try:
         config = SearchConfig.from_preset(
             preset, task=task, proposer=proposer, api_base=api_base, task_options=options,

@@ -96,6 +96,9 @@ class ProposalRequest:
         The answer texts of every earlier proposal of this run, oldest first (a resumed run
         rebuilds them from its store): what a proposer without memory needs to try something
         new rather than a parent's forgotten sibling.
+    opening : bool
+        The batch is the search's wide first look (``LoopConfig.opening``): a proposer with a
+        list of likely solutions answers with it (a model is asked as in any explore batch).
     """
 
     candidates: Sequence[str]
@@ -104,6 +107,7 @@ class ProposalRequest:
     parents: Sequence[Parent] = ()
     prompt: Messages | Callable[[], Messages] = field(default_factory=list)
     tried: Sequence[str] = ()
+    opening: bool = False
     _built: Messages | None = field(default=None, init=False, repr=False)
 
     @property

@@ -20,23 +20,27 @@ class BuiltinAdapter:
 
     def __init__(self, builtin: BuiltinProposer) -> None:
         self.builtin = builtin
-        self.reads_tried = _takes_tried(builtin)
+        self.reads_tried = _takes(builtin, "tried")
+        self.reads_opening = _takes(builtin, "opening")
 
     @property
     def name(self) -> str:
         return self.builtin.name
 
     def propose(self, request: ProposalRequest) -> list[Proposal]:
-        extra = {"tried": list(request.tried)} if self.reads_tried else {}
+        extra: dict[str, object] = {"tried": list(request.tried)} if self.reads_tried else {}
+        if self.reads_opening:
+            extra["opening"] = request.opening
         texts = self.builtin.propose_from(
             list(request.parents), request.temperature, request.n, request.seed, **extra
         )
         return [Proposal(text, self.name, request.temperature) for text in texts[: request.n]]
 
 
-def _takes_tried(builtin: BuiltinProposer) -> bool:
-    """Whether ``builtin.propose_from`` takes the run's earlier answers (``tried=``)."""
+def _takes(builtin: BuiltinProposer, keyword: str) -> bool:
+    """Whether ``builtin.propose_from`` takes ``keyword``: the run's earlier answers
+    (``tried=``), whether the batch is the search's opening (``opening=``)."""
     try:
-        return "tried" in inspect.signature(builtin.propose_from).parameters
+        return keyword in inspect.signature(builtin.propose_from).parameters
     except (TypeError, ValueError):
         return False

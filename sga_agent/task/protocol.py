@@ -76,8 +76,10 @@ class BuiltinProposer(Protocol):
     parents, high means bolder ones. Everything random derives from ``seed``, so a call with
     the same arguments returns the same answers. A proposer whose ``propose_from`` also takes
     a keyword ``tried`` is given the answer texts of every earlier proposal of the run (oldest
-    first), so it can avoid what was already evaluated; one without it works as before. The
-    task options it is meant to run with are the task's :attr:`TaskBase.builtin_options`.
+    first), so it can avoid what was already evaluated; one that takes a keyword ``opening``
+    is told whether the batch is the search's wide first look (``--opening``), which it may
+    answer with a list of likely solutions; one without them works as before. The task
+    options it is meant to run with are the task's :attr:`TaskBase.builtin_options`.
     """
 
     name: str
@@ -113,6 +115,10 @@ class TaskBase:
     #: fit. The ``quick`` preset then screens its candidates (``--fidelity multi``) unless the
     #: command says otherwise or gives a time budget. Default: False (a screen costs a full fit).
     screens_cheaply: ClassVar[bool] = False
+    #: The share of a full fit each screen of the ``quick`` preset's opening takes (its wide
+    #: first iteration, with this task's built-in proposer, where it screens cheaply): the
+    #: least that ranks the task's solutions as their full fits rank them. Default: 0.1.
+    opening_screen: ClassVar[float] = 0.1
     #: Modules the capture server imports once, before it confines any capture (torch, the
     #: task's own capture module): a confined capture may be unable to import them.
     capture_modules: ClassVar[tuple[str, ...]] = ()

@@ -93,10 +93,20 @@ def test_the_quick_preset_screens_only_where_a_screen_is_cheap_and_no_budget_is_
     assert quick_screening("sga", {}, screens_cheaply=True) == {}
     assert quick_screening("quick", {"fidelity": "full"}, screens_cheaply=True) == {}
     assert quick_screening("sga", {"fidelity": "multi"}, screens_cheaply=False) == {}
-    from tasks.constitutive.task import GranularTask
+    from tasks.constitutive.task import ElasticTask, GranularTask
     from tasks.observed.task import ObservedTask
 
     assert GranularTask.screens_cheaply and not ObservedTask.screens_cheaply
+    # with the task's built-in proposer: the opening, at the task's screen fidelity
+    opening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": 5, "opening": 40,
+               "promote": 0.1}  # fmt: skip
+    assert quick_screening("quick", {}, True, ElasticTask.opening_screen) == opening
+    assert quick_screening("quick", {}, True, GranularTask.opening_screen)["screen_fidelity"] == 0.1
+    assert "opening" not in quick_screening("quick", {"opening": 0}, True, 0.1)  # the user's
+    assert quick_screening("quick", {"max_seconds": 60.0}, True, 0.1) == {}
+    assert quick_screening("quick", {}, False, 0.1) == {}
+    # a search whose shape the command sets has no opening
+    assert "opening" not in quick_screening("quick", {"explore": 1}, True, 0.1)
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ from sga_agent.proposers.base import Proposal, ProposalRequest, ProposerError
 from sga_agent.proposers.builtin import BuiltinAdapter
 from sga_agent.proposers.replay import ReplayProposer
 from sga_agent.run_store import RunStore
-from sga_agent.search import Search
+from sga_agent.search import Search, slots_of
 from sga_agent.task import Evaluation, Parent, PromptParts
 
 LAW = """```python
@@ -376,6 +376,33 @@ def test_a_builtin_proposer_without_tried_is_called_as_before(tmp_path):
     store = RunStore.create(tmp_path, cfg, {})
     Search(cfg, FakeTask(), BuiltinAdapter(Halving()), LossInCode(), store).run()
     assert len(list(store.path.glob("candidates/*/response.txt"))) == 6
+
+
+class Opening(Halving):
+    """A built-in proposer double that is told whether a batch is the search's opening."""
+
+    name = "builtin:opening"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.openings: list[tuple[float, int, bool]] = []
+
+    def propose_from(self, parents, temperature, n, seed, opening=False):
+        self.openings.append((temperature, n, opening))
+        return super().propose_from(parents, temperature, n, seed)
+
+
+def test_the_opening_is_the_first_iteration_s_wider_explore_batch_and_only_it(tmp_path):
+    cfg = config(iterations=2, opening=5)
+    assert [len(slots_of(cfg.loop, i)) for i in (1, 2)] == [6, 3]
+    assert cfg.loop.candidates == 1 + 6 + 3
+    store = RunStore.create(tmp_path, cfg, {})
+    builtin = Opening()
+    Search(cfg, FakeTask(), BuiltinAdapter(builtin), LossInCode(), store).run()
+    assert builtin.openings == [(0.5, 1, False), (1.0, 5, True), (0.5, 1, False), (1.0, 2, False)]
+    assert len(list(store.path.glob("candidates/*/response.txt"))) == 9
+    # an opening no wider than --explore changes nothing
+    assert [len(slots_of(config(opening=2).loop, i)) for i in (1, 2)] == [3, 3]
 
 
 class Failing(Scripted):

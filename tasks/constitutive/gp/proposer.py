@@ -9,7 +9,10 @@ their parents' fitted parameter values (``Parent.parameters``), not from the val
 started with: the fit accumulates over generations, as in a Lamarckian (memetic) algorithm;
 a plastic correction new to its parents starts from a fresh weight.
 
-Temperature sets the mix of operators: at the exploit temperature (0.5 and below) mostly small
+The first child of a batch at the exploit temperature (0.5 and below) continues the best
+parent's fit where it had not settled: the same law from its fitted values (a fit of a few
+epochs from a poor start stops short; fitted again, it goes on). Temperature sets the mix of
+operators: at the exploit temperature mostly small
 steps (perturbed starting values, a swapped operation, one term added or dropped) from parents
 chosen by large tournaments; at the explore temperature (1.0 and above) mostly subtree
 replacement, crossover and fresh random laws from parents chosen by pairs. In between, the
@@ -47,9 +50,11 @@ from tasks.constitutive.gp.genome import (
     Genome,
     Param,
     Term,
+    params,
     random_coefficient,
     random_genome,
     to_json,
+    with_param,
 )
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS, restart
@@ -77,6 +82,14 @@ PAIR_SPREAD = 0.1  # standard deviation of a pair's log-moduli around their matc
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
+#: A fit that moved a constant (its raw value: a log, a logit) this much had not settled: the
+#: first exploit child fits that law again from where it stopped (:func:`_continuation`).
+MOVED = 0.01
+#: The log-range an opening's plastic form is started from a second time. The start range of
+#: plastic constants (``grammar.KIND_INITIAL``, e^-5 to e^-2) suits a yield strain (a yield
+#: stress of a few hundredths of the stiffness); a dimensionless slope, a cone's, is of order
+#: 0.1 to 1, where a fit of a few epochs from e^-4 stops short.
+HIGHER_START = (-2.0, 0.0)
 DESCRIPTIONS = {
     "perturb": "moved one starting value of",
     "rescale": "scaled every term's coefficient of",
@@ -138,11 +151,15 @@ class GeneticProgrammingProposer:
         n: int,
         seed: int,
         tried: Sequence[str] = (),
+        opening: bool = False,
     ) -> list[str]:
         """``n`` answers, each one generated law in a python block; same inputs, same answers.
 
         ``tried`` holds the run's earlier answers: their forms count as known, so structural
-        children and the enumeration of small forms skip them."""
+        children and the enumeration of small forms skip them. In the search's ``opening``
+        every child is the next untried small form (pair of forms) while one is left; a
+        plastic form with a positive constant is tried twice, the second time from higher
+        constants (:data:`HIGHER_START`)."""
         rng = random.Random(seed)
         pool = [_Member(self._genome(p), _loss(p.loss)) for p in parents]
         if not pool:
@@ -155,10 +172,24 @@ class GeneticProgrammingProposer:
         listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
         reference = _reference(pool) if self.searched == "elastic" else (None, math.nan)
         answers = []
-        for _ in range(n):
-            child, note = self._next_small_form(rng, temperature, listed, reference) or self._child(
-                rng, pool, temperature, seen, forms
-            )
+        if n and exploration(temperature) == 0:
+            continued = _continuation(parents, self.searched, {to_json(g) for g in earlier})
+            if continued is not None:
+                child, note = continued
+                seen.add(to_json(child))
+                answers.append(_answer(law_code(child), note))
+        second: list[tuple[Genome, str]] = []  # an opening form's start from higher constants
+        for _ in range(n - len(answers)):
+            if second:
+                child, note = second.pop()
+            else:
+                child, note = self._next_small_form(
+                    rng, temperature, listed, reference, opening
+                ) or self._child(rng, pool, temperature, seen, forms)
+                new_form = opening and loose_form(child) not in listed
+                higher = _higher_start(rng, child) if new_form else None
+                if higher is not None and self.searched == "plastic":
+                    second.append((higher, f"{note}, from higher constants"))
             seen.add(to_json(child))
             forms.add(form(child))
             if len(child.terms) <= enumerated:
@@ -172,12 +203,14 @@ class GeneticProgrammingProposer:
         temperature: float,
         listed: set[Key],
         reference: tuple[tuple[float, float] | None, float],
+        opening: bool = False,
     ) -> tuple[Genome, str] | None:
-        """With a chance that grows with temperature, the most probable small form (plastic) or
-        pair of forms (elastic) not yet tried, from new starting values (an elastic pair's
-        log-moduli matched to ``reference``, see :func:`_reference`); None otherwise or when
-        all are tried."""
-        share = exploration(temperature) * ENUMERATION_SHARE[self.searched]
+        """With a chance that grows with temperature (always in the ``opening``), the most
+        probable small form (plastic) or pair of forms (elastic) not yet tried, from new
+        starting values (an elastic pair's log-moduli matched to ``reference``, see
+        :func:`_reference`; in the opening a plastic correction's weight at 1); None
+        otherwise or when all are tried."""
+        share = 1.0 if opening else exploration(temperature) * ENUMERATION_SHARE[self.searched]
         if share <= 0 or rng.random() >= share:
             return None
         elastic = self.searched == "elastic"
@@ -190,6 +223,8 @@ class GeneticProgrammingProposer:
                 return child, f"tried pair of forms {rank} in order of prior probability, untried"
             child = restart(rng, genome, genome, temperature)
             assert child is not None
+            if opening:
+                child = _replacing(child)
             return child, f"tried small form {rank} in order of prior probability, untried"
         return None
 
@@ -238,6 +273,34 @@ class GeneticProgrammingProposer:
                 return genome
 
 
+def _continuation(
+    parents: Sequence[Parent], searched: str, answered: set[str]
+) -> tuple[Genome, str] | None:
+    """The best parent written with its fitted values, to be fitted again from where its fit
+    stopped, when that fit moved a constant by at least :data:`MOVED` (it had not settled)
+    and no earlier answer of the run (``answered``, genomes as JSON) is that law; None
+    otherwise."""
+    ranked = sorted(parents, key=lambda parent: _loss(parent.loss))
+    if not ranked or not math.isfinite(_loss(ranked[0].loss)):
+        return None
+    best = ranked[0]
+    started = genome_from_code(best.code, searched)
+    if started is None:
+        return None
+    fitted = with_values(started, best.parameters)
+    moved = max(
+        (
+            abs(a.raw - b.raw)
+            for (_, _, a), (_, _, b) in zip(params(started), params(fitted), strict=True)
+        ),
+        default=0.0,
+    )
+    if moved < MOVED or to_json(fitted) in answered:
+        return None
+    note = f"continued the fit of the best parent (loss {best.loss:.4g}), which moved its constants"
+    return fitted, note
+
+
 def _reference(pool: list[_Member]) -> tuple[tuple[float, float] | None, float]:
     """What the search knows of the body's stiffness, from the parents at their fitted values:
     the small-strain response (shear, volume) of the best admissible one whose terms are all
@@ -252,8 +315,7 @@ def _reference(pool: list[_Member]) -> tuple[tuple[float, float] | None, float]:
         if admissible(genome) and all(key in RESPONSES for key in keys):
             moduli = [math.exp(term.coefficient.raw) for term in genome.terms]
             shear, volume = (
-                sum(m * RESPONSES[k][i] for m, k in zip(moduli, keys, strict=True))
-                for i in (0, 1)
+                sum(m * RESPONSES[k][i] for m, k in zip(moduli, keys, strict=True)) for i in (0, 1)
             )
             return (shear, volume), stiffness
     return None, stiffness
@@ -287,6 +349,24 @@ def _with_moduli(rng: random.Random, genome: Genome, moduli: tuple[float, float]
         for term, modulus in zip(genome.terms, moduli, strict=True)
     )
     return replace(genome, terms=terms)
+
+
+def _replacing(genome: Genome) -> Genome:
+    """A plastic ``genome`` whose corrections start by replacing F (weight 1), as every
+    textbook return does: an opening's small form is fitted from there first."""
+    terms = tuple(replace(t, coefficient=replace(t.coefficient, raw=1.0)) for t in genome.terms)
+    return replace(genome, terms=terms)
+
+
+def _higher_start(rng: random.Random, genome: Genome) -> Genome | None:
+    """``genome`` with its positive constants (log leaves) drawn from :data:`HIGHER_START`;
+    None when it has none."""
+    found = [(index, path, param) for index, path, param in params(genome)
+             if path is not None and param.transform == "log"]  # fmt: skip
+    for index, path, param in found:
+        raw = round(rng.uniform(*HIGHER_START), 4)
+        genome = with_param(genome, index, path, replace(param, raw=raw))
+    return genome if found else None
 
 
 def _fresh_weights(rng: random.Random, child: Genome, parents: tuple[Genome, ...]) -> Genome:

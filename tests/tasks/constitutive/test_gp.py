@@ -32,7 +32,12 @@ from tasks.constitutive.gp.genome import (
     random_genome,
     random_term,
 )
-from tasks.constitutive.gp.proposer import CONSTANT_MOVES, DESCRIPTIONS, operator_weights
+from tasks.constitutive.gp.proposer import (
+    CONSTANT_MOVES,
+    DESCRIPTIONS,
+    HIGHER_START,
+    operator_weights,
+)
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS
 from tasks.constitutive.inner import scalar_parameters
@@ -561,3 +566,53 @@ def test_structural_children_are_new_to_the_whole_run():
     structural = [a for a in later if not any(move in a for move in moves)]
     forms = {form(genome_from_code(parse_response(a).code, "plastic")) for a in structural}
     assert len(structural) > 20 and not forms & known
+
+
+def test_the_opening_tries_every_small_form_in_order_replacing_F_and_slopes_twice():
+    """In the search's opening each child is the next untried small form, its correction
+    replacing F (weight 1); a form with a positive constant comes a second time, from higher
+    constants; elastic pairs come in order too."""
+    proposer = GeneticProgrammingProposer("plastic")
+    seed = [Parent(prompt_text.PLASTIC_SEED, 1.0)]
+    answers = proposer.propose_from(seed, 1.0, 40, seed=1, opening=True)
+    rank = re.compile(r"tried small form (\d+) in order[^.]*?(, from higher constants)?\.")
+    found = [(int(m.group(1)), bool(m.group(2))) for a in answers if (m := rank.search(a))]
+    assert len(found) == 40
+    firsts = [r for r, higher in found if not higher]
+    assert firsts == list(range(1, len(firsts) + 1))
+    genomes = [genome_from_code(parse_response(a).code, "plastic") for a in answers]
+    for (_, higher), genome in zip(found, genomes, strict=True):
+        assert all(term.coefficient.raw == 1.0 for term in genome.terms)
+        logs = [p.raw for _, path, p in params(genome) if path is not None and p.transform == "log"]
+        if higher:
+            assert logs and all(HIGHER_START[0] <= v <= HIGHER_START[1] for v in logs)
+        elif logs:
+            assert all(v <= grammar.initial("log", "plastic")[1] for v in logs)
+    slopes = [r for r, higher in found if higher]
+    cone = next(i for i, g in enumerate(small_forms("plastic"), 1) if "cone" in str(form(g)))
+    assert cone in slopes and len(slopes) >= 5
+    pairs = GeneticProgrammingProposer("elastic").propose_from(
+        [Parent(prompt_text.ELASTIC_SEED, 1.0)], 1.0, 10, seed=1, opening=True)  # fmt: skip
+    pair = re.compile(r"tried pair of forms (\d+) in order")
+    assert [int(pair.search(a).group(1)) for a in pairs] == list(range(1, 11))
+
+
+def test_an_unsettled_fit_of_the_best_parent_is_continued_once_by_the_first_exploit_child():
+    """The first child at the exploit temperature is the best parent at its fitted values
+    while that fit moved a constant and no earlier answer is that law; a settled fit, an
+    explore batch or an answer already given is not continued."""
+    genome = small_forms("plastic")[16]
+    started = law_code(with_values(genome, {"weight0": 1.0, "log_k1": -3.9}))
+    best = Parent(started, 1e-6, {"weight0": 0.7, "log_k1": -1.5})
+    worse = Parent(prompt_text.PLASTIC_SEED, 1e-4)
+    proposer = GeneticProgrammingProposer("plastic")
+    first = proposer.propose_from([worse, best], 0.5, 2, seed=0)
+    assert "continued the fit of the best parent" in first[0]
+    continued = genome_from_code(parse_response(first[0]).code, "plastic")
+    assert continued == with_values(genome, {"weight0": 0.7, "log_k1": -1.5})
+    assert "continued" not in first[1]
+    assert not any("continued" in a for a in proposer.propose_from([worse, best], 1.0, 4, 0))
+    again = proposer.propose_from([worse, best], 0.5, 2, seed=1, tried=first)
+    assert not any("continued" in a for a in again)
+    settled = Parent(started, 1e-6, {"weight0": 1.0, "log_k1": -3.895})
+    assert not any("continued" in a for a in proposer.propose_from([settled], 0.5, 2, 0))
