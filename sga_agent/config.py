@@ -369,8 +369,9 @@ class Budgets:
     ``max_tokens`` it used, ``max_evaluations`` run, ``max_seconds`` of wall time (over all
     the run's sessions, a resume included). A budget is a field here and a line in
     :meth:`spent_of`; the loop checks them all through :meth:`exceeded`, before each
-    iteration, each request to the proposer and each evaluation it submits (evaluations
-    already submitted finish)."""
+    iteration, each request to the proposer and each evaluation it submits. Evaluations
+    already submitted finish, except at ``max_seconds``: those still running then are
+    stopped, where the evaluator can stop them, and left for a resume."""
 
     max_usd: float | None = None
     max_tokens: int | None = None

@@ -41,10 +41,12 @@ class RunStarted(Event):
 
 @dataclass(frozen=True)
 class RunResumed(Event):
-    """A stopped run was continued (on another Ray cluster when ``ray_address`` is set)."""
+    """A stopped run was continued (on another Ray cluster when ``ray_address`` is set; with
+    a new wall-time budget, in seconds over all its sessions, when ``max_seconds`` is)."""
 
     type: ClassVar[str] = "resumed"
     ray_address: str | None = None
+    max_seconds: float | None = None
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,18 @@ class RunFinished(Event):
 
     type: ClassVar[str] = "run_finished"
     stopped: str
+
+
+@dataclass(frozen=True)
+class EvaluationsStopped(Event):
+    """The wall-time budget ran out while the ``candidates``' evaluations (screens, at
+    ``fidelity`` below 1, or full fits) ran: they were stopped and nothing of them recorded,
+    so a resume with a larger budget evaluates them again."""
+
+    type: ClassVar[str] = "evaluations_stopped"
+    candidates: list[str]
+    fidelity: float = 1.0
+    reason: str = ""
 
 
 # ---------------------------------------------------------------------- shown, never recorded

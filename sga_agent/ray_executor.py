@@ -338,6 +338,11 @@ class RayPool:
         if self._connected_here and self._ray.is_initialized():
             self._ray.shutdown()
 
+    def terminate(self) -> None:
+        """Stop now: every slot is killed, so running evaluations end at once, invalid (a
+        caller that terminates must not record them); then as :meth:`close`."""
+        self.close(wait_for_pending=False)
+
     def __enter__(self) -> RayPool:
         return self
 

@@ -82,6 +82,7 @@ class Recorded:
     evaluations: dict[str, Evaluation] = field(default_factory=dict)
     screens: dict[str, Evaluation] = field(default_factory=dict)
     finished: bool = False
+    stopped: str = ""  # the budget that stopped its last session, if one did
     seconds: float = 0.0
 
 
@@ -191,6 +192,16 @@ class RunStore:
         data = json.loads((self.path / CONFIG).read_text(encoding="utf-8"))
         return current_format(data["config"])
 
+    def update_config(self, config: SearchConfig) -> None:
+        """Record ``config`` as the run's from now on (a resume that gave the run a new time
+        budget), keeping config.json's other keys; written beside it and renamed over it, so
+        a kill leaves the old or the new, never half of one."""
+        data = json.loads((self.path / CONFIG).read_text(encoding="utf-8"))
+        data["config"] = config.to_dict()
+        written = self.path / f"{CONFIG}.new"
+        _dump(written, data)
+        os.replace(written, self.path / CONFIG)
+
     def config(self, options_type: type) -> SearchConfig:
         """The run's config, its task options built as an ``options_type`` object (the task's:
         load the task named by :meth:`config_record` once); raises
@@ -247,6 +258,7 @@ class RunStore:
                 recorded.screens[event["candidate"]] = Evaluation.from_dict(event["evaluation"])
             elif kind == ev.RunFinished.type:
                 recorded.finished = True
+                recorded.stopped = str(event.get("stopped") or "")
         if started is not None and last is not None:
             recorded.seconds += last - started
         return recorded

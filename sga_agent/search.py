@@ -18,7 +18,7 @@ import functools
 import inspect
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, as_completed
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -56,7 +56,9 @@ class Evaluator(Protocol):
     whose ``submit`` takes a keyword ``progress`` is given, with each evaluation, a callable
     to tell its progress notes (:class:`~sga_agent.task.FitProgress`; any thread), which the
     search shows as :class:`~sga_agent.events.FitProgressed` events; one without it works as
-    before.
+    before. An evaluator with a ``terminate()`` method is stopped with it when the wall-time
+    budget runs out while evaluations run (the search then ends; their futures' results are
+    not recorded); one without it is waited for.
     """
 
     def submit(
@@ -90,6 +92,8 @@ class SearchResult:
     totals: Totals
     stopped: str = ""  # "" when every iteration ran, else the budget that stopped it
     top: list[Entry] = field(default_factory=list)
+    #: Candidates whose evaluations the time budget stopped (unrecorded: a resume runs them).
+    interrupted: list[str] = field(default_factory=list)
 
     @property
     def best(self) -> Entry | None:
@@ -160,6 +164,8 @@ class Search:
         self._seconds_before = recorded.seconds  # the run's earlier sessions
         self._started = time.monotonic()
         self.settings: EvaluationSettings = config.evaluation_settings()
+        self._deadline = ""  # the time budget, once it stopped running evaluations
+        self._interrupted: list[str] = []  # the candidates whose evaluations it stopped
 
     # ------------------------------------------------------------------ the loop
 
@@ -197,7 +203,9 @@ class Search:
             self._emit(ev.IterationDone(iteration, top, tokens, self.totals.cost_usd - spent[1]))
             if stopped:
                 break
-        result = SearchResult(self.heap, self.totals, stopped, self.heap.top(self.loop.top_k))
+        result = SearchResult(
+            self.heap, self.totals, stopped, self.heap.top(self.loop.top_k), self._interrupted
+        )
         self.store.save_summary(self._summary(result))
         self._emit(ev.RunFinished(stopped))
         return result
@@ -381,13 +389,15 @@ class Search:
             screened.append((candidate, key))
         codes = {candidate: code for candidate, code, _ in candidates}
         self._started_fits(pending, settings)
-        for future in as_completed(pending):
+        for future in self._finished(pending, settings.fidelity):
             candidate, code = pending[future]
             evaluation = future.result()
             key = fingerprint(code)
             self._screen_fingerprints.setdefault(key, (candidate, evaluation))
             self._captured[key] = evaluation.artifacts.get("captured")
             self._store_screen(candidate, code, evaluation)
+        screened = [(c, key) for c, key in screened
+                    if c in self._screens or key in self._screen_fingerprints]  # fmt: skip
         for candidate, key in screened:
             if candidate not in self._screens:  # the same code as an earlier candidate
                 first, evaluation = self._screen_fingerprints[key]
@@ -402,7 +412,7 @@ class Search:
             if screen.valid:
                 self._screened_losses.setdefault(key, screen.loss)
         self._captured = {key: data for key, data in self._captured.items() if key in keys}
-        return stopped, passed | {candidate for candidate, key in screened if key in keys}
+        return stopped or self._deadline, passed | {c for c, key in screened if key in keys}
 
     def _store_screen(self, candidate: str, code: str, evaluation: Evaluation) -> None:
         """Write a finished screen to the run store (its event last: the commit point)."""
@@ -449,16 +459,61 @@ class Search:
                 pending[self._submit(candidate, code, self.settings, captured)] = (candidate, code)
             order.append((candidate, code, key))
         self._started_fits(pending, self.settings)
-        for future in as_completed(pending):
+        for future in self._finished(pending, 1.0):
             self._store(*pending[future], future.result())
         for candidate, code, key in order:
+            if candidate not in self._evaluations and key not in self._fingerprints:
+                continue  # stopped at the deadline: a resume evaluates it
             if candidate not in self._evaluations:  # the same code as an earlier candidate
                 first, evaluation = self._fingerprints[key]
                 copy = Evaluation.from_dict(evaluation.to_dict())
                 copy.extras["duplicate_of"] = first
                 self._store(candidate, code, copy)
             self._push(candidate, code, key, self._evaluations[candidate])
-        return stopped
+        return stopped or self._deadline
+
+    def _finished(
+        self, pending: dict[Future[Evaluation], tuple[str, str]], fidelity: float
+    ) -> Iterator[Future[Evaluation]]:
+        """``pending``'s futures as they finish. When the wall-time budget runs out first and
+        the evaluator can be stopped (``terminate``), the running evaluations are stopped,
+        told as :class:`~sga_agent.events.EvaluationsStopped` and never yielded: nothing of
+        them is recorded, so a resume evaluates them again; ``_deadline`` then names the
+        budget."""
+        left = self._seconds_left()
+        stop = getattr(self.evaluator, "terminate", None)
+        if left is None or stop is None or not pending:
+            yield from as_completed(pending)
+            return
+        finishing = as_completed(pending, timeout=left)
+        yielded = set()
+        while True:
+            try:
+                future = next(finishing)
+            except StopIteration:
+                return
+            except TimeoutError:
+                break
+            yielded.add(future)
+            yield future
+        done = [future for future in pending if future.done() and future not in yielded]
+        running = [candidate for future, (candidate, _) in pending.items() if not future.done()]
+        # (running or queued behind the running ones: neither finished)
+        stop()
+        self._deadline = self.config.budgets.exceeded(self.totals, ("max_seconds",)) or (
+            f"max_seconds={self.config.budgets.max_seconds} reached"
+        )
+        self._interrupted += running
+        self._emit(ev.EvaluationsStopped(running, fidelity, "the wall-time budget ran out"))
+        yield from done
+
+    def _seconds_left(self) -> float | None:
+        """Wall seconds left of the run's time budget (None: no time budget), at least 0."""
+        limit = self.config.budgets.max_seconds
+        if limit is None:
+            return None
+        self._budget_reached()
+        return max(limit - self.totals.seconds, 0.0)
 
     def _submit(
         self,
@@ -569,6 +624,7 @@ class Search:
             "valid": result.totals.valid,
             "invalid": result.totals.invalid,
             "screened": result.totals.screened,
+            "interrupted": result.interrupted,
         }
 
 

@@ -523,6 +523,9 @@ def _counts(evaluations: Any, screens: Any, result: SearchResult, spend: bool) -
         text += f", {counted(result.totals.tokens, 'token')}, ${result.totals.cost_usd:.4f}"
     if result.stopped:
         text += f"; stopped: {result.stopped}"
+    if result.interrupted:
+        text += (f" ({counted(len(result.interrupted), 'evaluation')} not finished then, "
+                 "left for `sga-agent resume` with a larger --time-budget)")  # fmt: skip
     return text
 
 

@@ -8,6 +8,7 @@ import click
 
 from sga_agent import registry
 from sga_agent.cli import main
+from sga_agent.cli.options import Duration
 from sga_agent.cli.search import check_executor, execute, prepare
 from sga_agent.config import UNTIL_BUDGET, ConfigError, SearchConfig
 from sga_agent.events import RunResumed
@@ -24,8 +25,17 @@ from sga_agent.search import slots_of
     metavar="HOST:PORT",
     help="Continue a run of --executor ray on this Ray cluster instead of its own.",
 )
+@click.option(
+    "--time-budget",
+    "max_seconds",
+    type=Duration(),
+    help="A new wall-time budget for the whole run, its earlier sessions included, e.g. 20m "
+    "(recorded as the run's): to evaluate what a time budget stopped, or to search longer.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
-def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
+def resume(
+    run_dir: Path, ray_address: str | None, max_seconds: float | None, as_json: bool
+) -> None:
     """Continue the search recorded in RUN_DIR.
 
     Recorded model answers are not asked again and finished evaluations are not re-run; the
@@ -50,19 +60,27 @@ def resume(run_dir: Path, ray_address: str | None, as_json: bool) -> None:
         config = store.config(loaded.options_type)
     except ConfigError as error:
         raise click.BadParameter(str(error), param_hint="'RUN_DIR'") from error
-    if ray_address is not None:
-        try:
+    try:
+        if ray_address is not None:
             config = config.replace(ray_address=ray_address)
-        except ConfigError as error:
-            raise click.UsageError(str(error)) from error
+        if max_seconds is not None:
+            config = config.replace(max_seconds=max_seconds)
+    except ConfigError as error:
+        raise click.UsageError(str(error)) from error
     check_executor(config)
     task, proposer = prepare(config, loaded)
     if answers_wanted(config, store):
         check_model_answers(proposer, store)
-    if store.recorded().finished:
+    recorded = store.recorded()
+    if recorded.finished and not recorded.stopped:
         click.echo("this run had finished: nothing is left to evaluate; its result:", err=True)
+    elif recorded.stopped and max_seconds is None:
+        click.echo(f"this run was stopped by its budget ({recorded.stopped}); a larger "
+                   "--time-budget lets a time-stopped run go on", err=True)  # fmt: skip
     try:
-        store.append(RunResumed(ray_address))
+        if max_seconds is not None:
+            store.update_config(config)
+        store.append(RunResumed(ray_address, max_seconds))
         execute(config, store, as_json, proposer, task)
     except RunFolderFull as error:  # the disk is full: the message says what to do
         raise click.ClickException(str(error)) from error

@@ -176,7 +176,8 @@ def from_preset(name: str) -> str:
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
 @click.option("--time-budget", "max_seconds", type=Duration(),
               help="Budget in wall time, e.g. 15m or 1h30m (a resume counts the time the run "
-              "already took). No evaluation starts after it; those running finish. Without "
+              "already took). At it, the evaluations running are stopped, recorded as "
+              "stopped and left for a resume; the best found is then assessed. Without "
               "--iterations the search iterates until it.")
 @click.option("--seed", type=int, default=default("seed"), show_default=True,
               help="Seed of the run.")

@@ -190,3 +190,37 @@ def test_a_second_interrupt_exits_at_once(tmp_path, held_task):
     # 130 from the handler, or killed by SIGINT itself when the second one lands while the
     # interpreter is already exiting (its handlers are reset then): the shell shows 130 both ways
     assert process.returncode in (130, -signal.SIGINT), stderr[-3000:]
+
+
+@pytest.mark.slow
+def test_the_time_budget_stops_a_held_evaluation_and_a_resume_with_more_time_runs_it(
+    tmp_path, held_task
+):
+    """The budget passes while two held evaluations wait (one running, one queued): the search
+    ends near it, kills its helpers, records neither and names them; a resume with a larger
+    --time-budget, recorded as the run's, evaluates them."""
+    hold, temporary, env = held_task
+    command = [sys.executable, "-m", "sga_agent", "search", "--task", "held", "--model",
+               "builtin", "--iterations", "2", "--exploit", "1", "--explore", "2",
+               "--workers", "1", "--time-budget", "6s", "--out-dir", str(tmp_path / "runs"),
+               "--json"]  # fmt: skip
+    started = time.monotonic()
+    done = subprocess.run(command, capture_output=True, text=True, timeout=90, env=env)
+    seconds = time.monotonic() - started
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert seconds < 60, f"the search took {seconds:.1f} s"
+    assert helpers_left(temporary) == []
+    summary = json.loads(done.stdout.strip().splitlines()[-1])
+    assert summary["stopped"] == "max_seconds=6.0 reached"
+    assert summary["interrupted"] == ["01-explore-00", "01-explore-01"]
+    (run,) = (tmp_path / "runs").iterdir()
+    assert evaluations(run) == ["00-seed", "01-exploit-00"]
+
+    hold.unlink()
+    resumed = subprocess.run(
+        [sys.executable, "-m", "sga_agent", "resume", str(run), "--time-budget", "5m", "--json"],
+        capture_output=True, text=True, timeout=300, env=env,
+    )  # fmt: skip
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert {"01-explore-00", "01-explore-01"} <= set(evaluations(run))
+    assert json.loads((run / "config.json").read_text())["config"]["budgets"]["max_seconds"] == 300

@@ -6,11 +6,12 @@ returns, so the ranking is known in advance.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import threading
 import time
-from concurrent.futures import Future
+from concurrent.futures import Future, InvalidStateError
 from dataclasses import dataclass
 
 import pytest
@@ -158,10 +159,11 @@ class SlowLossInCode(LossInCode):
 
 
 def test_time_budget_starts_no_evaluation_after_it(tmp_path):
+    answers = [LAW.format(value=v) for v in range(10, 20)]
+    run(tmp_path / "warm", answers[:3], iterations=1)  # imports, so that the budget is the wait
     cfg = config(max_seconds=0.6)
     store = RunStore.create(tmp_path, cfg, {})
     evaluator = SlowLossInCode(0.4)
-    answers = [LAW.format(value=v) for v in range(10, 20)]
     result = Search(cfg, FakeTask(), Scripted(answers), evaluator, store).run()
     # the seed ends at 0.4 s; the first offspring starts before 0.6 s, the next one would not
     assert result.stopped == "max_seconds=0.6 reached"
@@ -403,6 +405,67 @@ def test_the_opening_is_the_first_iteration_s_wider_explore_batch_and_only_it(tm
     assert len(list(store.path.glob("candidates/*/response.txt"))) == 9
     # an opening no wider than --explore changes nothing
     assert [len(slots_of(config(opening=2).loop, i)) for i in (1, 2)] == [3, 3]
+
+
+class RunsUntilStopped(LossInCode):
+    """Evaluator double: a law of loss 7 runs until ``terminate``, which ends it invalid as a
+    killed pool ends its running evaluations (or for 10 s, then finishes); the others finish
+    at once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.running: list[Future[Evaluation]] = []
+        self.terminated = False
+
+    def submit(self, task, solution, settings) -> Future[Evaluation]:
+        if "loss 7.0" not in solution:
+            return super().submit(task, solution, settings)
+        self.calls.append(solution)
+        future: Future[Evaluation] = Future()
+        self.running.append(future)
+        threading.Timer(10.0, self._end, (future, Evaluation(True, 7.0, "finished"))).start()
+        return future
+
+    def terminate(self) -> None:
+        self.terminated = True
+        for future in self.running:
+            self._end(future, Evaluation.invalid("the pool was stopped", status="error"))
+
+    @staticmethod
+    def _end(future: Future[Evaluation], evaluation: Evaluation) -> None:
+        with contextlib.suppress(InvalidStateError):
+            future.set_result(evaluation)
+
+
+def test_the_time_budget_stops_the_evaluations_running_at_it_and_a_resume_evaluates_them(
+    tmp_path,
+):
+    """At the wall-time budget the evaluation still running is stopped (not waited for), told
+    as an event and not recorded; those finished are kept; a resume with a larger budget
+    evaluates the stopped one."""
+    answers = [LAW.format(value=v) for v in (3.0, 7.0, 2.0, 1.5, 1.25, 1.125)]
+    run(tmp_path / "warm", answers[:3], iterations=1)  # imports, so that the budget is the wait
+    cfg = config(iterations=2, max_seconds=1.0)
+    store = RunStore.create(tmp_path, cfg, {})
+    evaluator = RunsUntilStopped()
+    started = time.monotonic()
+    result = Search(cfg, FakeTask(), Scripted(answers), evaluator, store).run()
+    assert time.monotonic() - started < 5 and evaluator.terminated
+    assert result.stopped == "max_seconds=1.0 reached" and result.interrupted == ["01-explore-00"]
+    assert json.loads((store.path / "summary.json").read_text())["interrupted"] == ["01-explore-00"]
+    events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
+    stops = [event for event in events if event["type"] == "evaluations_stopped"]
+    assert [(e["candidates"], e["fidelity"]) for e in stops] == [(["01-explore-00"], 1.0)]
+    assert not (store.path / "candidates/01-explore-00/evaluation.json").exists()
+    kept = {e["candidate"]: e["evaluation"]["loss"] for e in events if e["type"] == "evaluation"}
+    assert kept == {"00-seed": 100.0, "01-exploit-00": 3.0, "01-explore-01": 2.0}
+    assert result.best.loss == 2.0
+    # a resume with a larger budget evaluates the stopped candidate, asks for the rest
+    again = Search(config(iterations=2, max_seconds=60.0), FakeTask(), Scripted(answers[3:]),
+                   LossInCode(), RunStore.open(store.path)).run()  # fmt: skip
+    assert again.stopped == "" and again.best.loss == 1.125
+    resumed = json.loads((store.path / "candidates/01-explore-00/evaluation.json").read_text())
+    assert resumed["loss"] == 7.0
 
 
 class Failing(Scripted):
