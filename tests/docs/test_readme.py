@@ -101,20 +101,43 @@ def best_loss(screen: str) -> float:
     return float(re.search(r"^best: \S+, loss (\S+),", screen, re.MULTILINE).group(1))
 
 
-@pytest.mark.slow
-def test_the_main_command_piped_prints_the_readme_screen_with_a_law_that_compiles(tmp_path):
-    """``sga-agent search --task granular > out.txt``: the law in the file is Python, and the
-    screen has the README's parts and its best loss (within 2x: another CPU may differ)."""
-    piped = tmp_path / "out.txt"
+def piped_search(folder: Path, *options: str) -> str:
+    """``sga-agent search --task granular OPTIONS > out.txt``: what the file holds."""
+    piped = folder / "out.txt"
     with piped.open("w") as stdout:
         done = subprocess.run(
-            [sys.executable, "-m", "sga_agent", "search", "--task", "granular"], cwd=tmp_path,
-            stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=3600,
+            [sys.executable, "-m", "sga_agent", "search", "--task", "granular", *options],
+            cwd=folder, stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=3600,
         )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
-    screen = piped.read_text(encoding="utf-8")
+    return piped.read_text(encoding="utf-8")
+
+
+def readme_screen() -> str:
+    return re.search(r"```text\n(.*?)```", text(), re.S).group(1)
+
+
+@pytest.mark.slow
+def test_a_piped_search_prints_the_readme_s_parts_and_a_law_that_compiles(tmp_path):
+    """A short search with its output in a file: the law printed is Python (never wrapped)
+    and the screen has the README's parts in its order."""
+    screen = piped_search(tmp_path, "--iterations", "1", "--exploit", "1", "--explore", "1",
+                          "--epochs", "1")  # fmt: skip
     code = re.search(r"written in:\n(.*?)\n\d+ evaluations? ", screen, re.S).group(1)
     compile(code, "out.txt", "exec")
-    readme = re.search(r"```text\n(.*?)```", text(), re.S).group(1)
+    assert parts(readme_screen()) == list(SCREEN_PARTS)
+    shown = [part for part in SCREEN_PARTS if part != "failures:" or part in parts(screen)]
+    assert parts(screen) == shown  # a search without failures has no failures line
+
+
+@pytest.mark.heavy
+def test_the_main_command_piped_prints_the_readme_screen_with_a_law_that_compiles(tmp_path):
+    """``sga-agent search --task granular > out.txt`` (two to three minutes): the law in the
+    file is Python, and the screen has the README's parts and its best loss (within 2x:
+    another CPU may differ)."""
+    screen = piped_search(tmp_path)
+    code = re.search(r"written in:\n(.*?)\n\d+ evaluations? ", screen, re.S).group(1)
+    compile(code, "out.txt", "exec")
+    readme = readme_screen()
     assert parts(screen) == parts(readme) == list(SCREEN_PARTS)
     assert 0.5 < best_loss(screen) / best_loss(readme) < 2, (screen, readme)

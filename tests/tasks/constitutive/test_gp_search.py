@@ -35,7 +35,7 @@ class InProcess:
         return future
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # 22 s of search quality: benchmarks/discovery.py measures it in full
 def test_small_gp_search_beats_the_seed(tmp_path):
     """One iteration of four children, fitted as `sga-agent search` fits them (L-BFGS, the
     GP's preferred option), on a 200-step scene: measured over seeds 0, 1, 2 the best child

@@ -93,7 +93,7 @@ def test_the_gp_proposers_laws_are_not_refused():
         assert cost.per_particle <= law_cost.MAX_COST / 20, (name, law_cost.describe(cost))
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # 27 s; test_the_gp_proposers_laws_are_not_refused, in CI, samples fewer
 def test_many_gp_laws_are_not_refused():
     worst = max(cost_of(code).per_particle for code in gp_laws(per_kind=40, seed=8).values())
     print(f"the costliest of 80 random and 24 proposed GP laws: {worst:.0f} values per particle")

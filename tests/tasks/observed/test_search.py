@@ -39,7 +39,7 @@ def make_observation(path: Path) -> None:
     ))  # fmt: skip
 
 
-@pytest.mark.slow
+@pytest.mark.heavy  # a minute of search quality: benchmarks/discovery.py measures it in full
 def test_the_gp_finds_a_law_5x_better_than_the_seed(registered, tmp_path: Path) -> None:
     observation = tmp_path / "observed.npz"
     subprocess.run([sys.executable, "-c", (
