@@ -57,11 +57,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 UNTIL_BUDGET = 1_000_000
 
 
-#: The opening of the quick preset's built-in search: as many answers as the constitutive
-#: tasks' genetic programming lists plastic forms (``enumeration.LISTED``), each screened at
-#: the task's ``opening_screen`` share of a fit, a tenth of each iteration's screens promoted
-#: (4 of the opening's 40; ``benchmarks/search_speed.py`` measures the command).
-QUICK_OPENING = 40
+#: A tenth of each iteration's screens is fitted in full in the quick preset's search with an
+#: opening (4 of the opening's 40; ``benchmarks/discovery.py --budget none`` measures it).
 OPENING_PROMOTE = 0.1
 
 
@@ -70,13 +67,15 @@ def quick_screening(
     settings: dict[str, Any],
     screens_cheaply: bool,
     opening_screen: float | None = None,
+    opening_answers: int = 40,
 ) -> dict[str, Any]:
     """The settings the ``quick`` preset adds to ``settings`` where they leave them unset, on
     a task that screens cheaply and without a time budget.
 
-    With the task's built-in proposer (``opening_screen``: the task's screen fidelity for it)
-    and the preset's iterations, exploit and explore counts: a wide first iteration
-    (``opening``, the proposer's most likely forms), screens at ``opening_screen`` of a fit,
+    With the task's built-in proposer (``opening_screen`` and ``opening_answers``: the task's
+    screen fidelity and opening size for it) and the preset's iterations, exploit and explore
+    counts: a wide first iteration (``opening``, the proposer's most likely forms), screens at
+    ``opening_screen`` of a fit,
     a tenth of each iteration's screens promoted below the K-th best earlier screen.
     Otherwise (a model, or a search shaped by the command): its candidates screened at 0.2 of
     a fit and promoted below the K-th best earlier screen (a short search needs its few full
@@ -94,7 +93,7 @@ def quick_screening(
     screening: dict[str, Any] = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": rank}
     shaped = any(settings.get(name) is not None for name in ("iterations", "exploit", "explore"))
     if opening_screen is not None and screens_cheaply and not shaped:
-        screening |= {"opening": QUICK_OPENING, "screen_fidelity": opening_screen,
+        screening |= {"opening": opening_answers, "screen_fidelity": opening_screen,
                       "promote": OPENING_PROMOTE}  # fmt: skip
     return {name: value for name, value in screening.items() if settings.get(name) is None}
 

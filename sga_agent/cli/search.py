@@ -125,8 +125,9 @@ def from_preset(name: str) -> str:
               help="Share of the loss a fitted parameter must win: solutions rank by loss * "
               "(1 + parsimony) ** parameters (0: by loss alone).")
 @click.option("--opening", type=click.IntRange(min=0),
-              show_default="40 in quick with the built-in proposer on a task that screens "
-              "cheaply, without --time-budget, --iterations, --exploit or --explore; else 0",
+              show_default="in quick with the built-in proposer on a task that screens "
+              "cheaply, without --time-budget, --iterations, --exploit or --explore: the "
+              "task's (40; 20 on elastic); else 0",
               help="Explore answers of the first iteration, when more than --explore: a wide "
               "first look (the built-in proposer of laws tries its most likely forms).")
 @click.option("--no-bilevel", "no_bilevel", is_flag=True, default=None,
@@ -208,7 +209,8 @@ def search(
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
     described = as_task(loaded)
     opening_screen = described.opening_screen if builtin else None
-    settings |= quick_screening(preset, settings, described.screens_cheaply, opening_screen)
+    settings |= quick_screening(preset, settings, described.screens_cheaply, opening_screen,
+                                described.opening_answers)  # fmt: skip
     try:
         config = SearchConfig.from_preset(
             preset, task=task, proposer=proposer, api_base=api_base, task_options=options,

@@ -119,6 +119,9 @@ class TaskBase:
     #: first iteration, with this task's built-in proposer, where it screens cheaply): the
     #: least that ranks the task's solutions as their full fits rank them. Default: 0.1.
     opening_screen: ClassVar[float] = 0.1
+    #: How many answers that opening asks of the built-in proposer (its most likely
+    #: solutions, screened together). Default: 40.
+    opening_answers: ClassVar[int] = 40
     #: Modules the capture server imports once, before it confines any capture (torch, the
     #: task's own capture module): a confined capture may be unable to import them.
     capture_modules: ClassVar[tuple[str, ...]] = ()

@@ -98,9 +98,11 @@ def test_the_quick_preset_screens_only_where_a_screen_is_cheap_and_no_budget_is_
 
     assert GranularTask.screens_cheaply and not ObservedTask.screens_cheaply
     # with the task's built-in proposer: the opening, at the task's screen fidelity
-    opening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": 5, "opening": 40,
+    opening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": 5, "opening": 20,
                "promote": 0.1}  # fmt: skip
-    assert quick_screening("quick", {}, True, ElasticTask.opening_screen) == opening
+    elastic = ElasticTask.opening_screen, ElasticTask.opening_answers
+    assert quick_screening("quick", {}, True, *elastic) == opening
+    assert quick_screening("quick", {}, True, GranularTask.opening_screen)["opening"] == 40
     assert quick_screening("quick", {}, True, GranularTask.opening_screen)["screen_fidelity"] == 0.1
     assert "opening" not in quick_screening("quick", {"opening": 0}, True, 0.1)  # the user's
     assert quick_screening("quick", {"max_seconds": 60.0}, True, 0.1) == {}
