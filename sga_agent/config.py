@@ -66,17 +66,16 @@ def quick_screening(
     preset: str,
     settings: dict[str, Any],
     screens_cheaply: bool,
-    opening_screen: float | None = None,
-    opening_answers: int = 40,
+    opening: tuple[int, float] | None = None,
 ) -> dict[str, Any]:
     """The settings the ``quick`` preset adds to ``settings`` where they leave them unset, on
     a task that screens cheaply and without a time budget.
 
-    With the task's built-in proposer (``opening_screen`` and ``opening_answers``: the task's
-    screen fidelity and opening size for it) and the preset's iterations, exploit and explore
-    counts: a wide first iteration (``opening``, the proposer's most likely forms), screens at
-    ``opening_screen`` of a fit,
-    a tenth of each iteration's screens promoted below the K-th best earlier screen.
+    With the task's built-in proposer (``opening``: the answers and the screen fidelity of the
+    task's opening, its ``opening_answers`` and ``opening_screen``) and the preset's
+    iterations, exploit and explore counts: a wide first iteration of that many answers (the
+    proposer's most likely forms), screens at that fidelity, a tenth of each iteration's
+    screens promoted below the K-th best earlier screen.
     Otherwise (a model, or a search shaped by the command): its candidates screened at 0.2 of
     a fit and promoted below the K-th best earlier screen (a short search needs its few full
     fits: with multi's own defaults, 0.1 and the bar at the best, the main command of the
@@ -92,8 +91,9 @@ def quick_screening(
     rank = settings.get("top_k") or PRESETS[preset]["top_k"]
     screening: dict[str, Any] = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": rank}
     shaped = any(settings.get(name) is not None for name in ("iterations", "exploit", "explore"))
-    if opening_screen is not None and screens_cheaply and not shaped:
-        screening |= {"opening": opening_answers, "screen_fidelity": opening_screen,
+    if opening is not None and screens_cheaply and not shaped:
+        answers, fidelity = opening
+        screening |= {"opening": answers, "screen_fidelity": fidelity,
                       "promote": OPENING_PROMOTE}  # fmt: skip
     return {name: value for name, value in screening.items() if settings.get(name) is None}
 
@@ -400,8 +400,12 @@ class Budgets:
                 continue
             limit = getattr(self, name)
             if limit is not None and spent >= limit:
-                return f"{name}={limit} reached"
+                return self.reached(name)
         return ""
+
+    def reached(self, name: str) -> str:
+        """How a run stopped by budget ``name`` says so: "max_usd=5.0 reached"."""
+        return f"{name}={getattr(self, name)} reached"
 
 
 #: The components of a run's config, by their field in :class:`SearchConfig`.

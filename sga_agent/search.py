@@ -248,7 +248,7 @@ class Search:
                 break
             seed = (self.config.seed * 1_000_003 + iteration) * 1009 + round(temperature * 100)
             tried = [self._answers[c]["text"] for c in sorted(self._answers)]
-            opening = iteration == 1 and self.loop.opening > self.loop.explore
+            opening = self.loop.explore_in(iteration) > self.loop.explore
             request = ProposalRequest(
                 candidates, temperature, seed, parents, prompt, tried,
                 opening=opening and temperature == self.loop.explore_temperature,
@@ -500,9 +500,7 @@ class Search:
         running = [candidate for future, (candidate, _) in pending.items() if not future.done()]
         # (running or queued behind the running ones: neither finished)
         stop()
-        self._deadline = self.config.budgets.exceeded(self.totals, ("max_seconds",)) or (
-            f"max_seconds={self.config.budgets.max_seconds} reached"
-        )
+        self._deadline = self.config.budgets.reached("max_seconds")
         self._interrupted += running
         self._emit(ev.EvaluationsStopped(running, fidelity, "the wall-time budget ran out"))
         yield from done

@@ -208,9 +208,8 @@ def search(
     if preset is None:
         preset = "quick" if proposer.startswith(runner.BUILTIN) else "sga"
     described = as_task(loaded)
-    opening_screen = described.opening_screen if builtin else None
-    settings |= quick_screening(preset, settings, described.screens_cheaply, opening_screen,
-                                described.opening_answers)  # fmt: skip
+    opening = (described.opening_answers, described.opening_screen) if builtin else None
+    settings |= quick_screening(preset, settings, described.screens_cheaply, opening)
     try:
         config = SearchConfig.from_preset(
             preset, task=task, proposer=proposer, api_base=api_base, task_options=options,

@@ -100,15 +100,16 @@ def test_the_quick_preset_screens_only_where_a_screen_is_cheap_and_no_budget_is_
     # with the task's built-in proposer: the opening, at the task's screen fidelity
     opening = {"fidelity": "multi", "screen_fidelity": 0.2, "promote_rank": 5, "opening": 20,
                "promote": 0.1}  # fmt: skip
-    elastic = ElasticTask.opening_screen, ElasticTask.opening_answers
-    assert quick_screening("quick", {}, True, *elastic) == opening
-    assert quick_screening("quick", {}, True, GranularTask.opening_screen)["opening"] == 40
-    assert quick_screening("quick", {}, True, GranularTask.opening_screen)["screen_fidelity"] == 0.1
-    assert "opening" not in quick_screening("quick", {"opening": 0}, True, 0.1)  # the user's
-    assert quick_screening("quick", {"max_seconds": 60.0}, True, 0.1) == {}
-    assert quick_screening("quick", {}, False, 0.1) == {}
+    elastic = ElasticTask.opening_answers, ElasticTask.opening_screen
+    granular = GranularTask.opening_answers, GranularTask.opening_screen
+    assert quick_screening("quick", {}, True, elastic) == opening
+    assert quick_screening("quick", {}, True, granular)["opening"] == 40
+    assert quick_screening("quick", {}, True, granular)["screen_fidelity"] == 0.1
+    assert "opening" not in quick_screening("quick", {"opening": 0}, True, granular)  # the user's
+    assert quick_screening("quick", {"max_seconds": 60.0}, True, granular) == {}
+    assert quick_screening("quick", {}, False, granular) == {}
     # a search whose shape the command sets has no opening
-    assert "opening" not in quick_screening("quick", {"explore": 1}, True, 0.1)
+    assert "opening" not in quick_screening("quick", {"explore": 1}, True, granular)
 
 
 @pytest.mark.parametrize(

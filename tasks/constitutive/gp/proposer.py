@@ -186,9 +186,10 @@ class GeneticProgrammingProposer:
                 child, note = self._next_small_form(
                     rng, temperature, listed, reference, opening
                 ) or self._child(rng, pool, temperature, seen, forms)
-                new_form = opening and loose_form(child) not in listed
-                higher = _higher_start(rng, child) if new_form else None
-                if higher is not None and self.searched == "plastic":
+                plastic = opening and self.searched == "plastic"
+                if plastic and loose_form(child) not in listed and (
+                    higher := _higher_start(rng, child)
+                ) is not None:
                     second.append((higher, f"{note}, from higher constants"))
             seen.add(to_json(child))
             forms.add(form(child))
