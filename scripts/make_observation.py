@@ -12,8 +12,10 @@ The hidden material goes beside the file as ``OUT.truth.json`` (family and param
 the ``observed`` task's report reads it; nothing shows it to a search.
 
 Scenes: ``thrown`` is a 5^3-particle cube of side 0.2 thrown, spinning, into the floor of
-a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``paper`` is the SGA paper's scene
-(:func:`taichi_mpm.paper_scene`: 10^3 particles, 20^3 grid, dt = 5e-4 s, 1000 steps).
+a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``gentle`` is the same cube tossed five times
+slower (400 steps by default), so that a soft body's strains stay small; ``paper`` is the SGA
+paper's scene (:func:`taichi_mpm.paper_scene`: 10^3 particles, 20^3 grid, dt = 5e-4 s, 1000
+steps).
 """
 
 from __future__ import annotations
@@ -34,24 +36,32 @@ from taichi_mpm.sysid.families import (
     parse_assignment,
 )
 
-SCENES = ("thrown", "paper")
+SCENES = ("thrown", "gentle", "paper")
 #: Default steps of each scene.
-DEFAULT_STEPS = {"thrown": 150, "paper": 1000}
+DEFAULT_STEPS = {"thrown": 150, "gentle": 400, "paper": 1000}
+#: The thrown cube's velocity (m/s) and spin (rad/s); the gentle scene's are a fifth of them.
+THROWN_VELOCITY, THROWN_SPIN = (0.8, -2.0, 0.3), (2.0, -1.0, 3.0)
+GENTLE = 0.2
 
 
-def thrown_scene(steps: int = 150):
-    """The scene of tests/taichi_mpm/sysid/test_fit.py: a small cube thrown at the floor."""
+def thrown_scene(steps: int = 150, speed: float = 1.0):
+    """The scene of tests/taichi_mpm/sysid/test_fit.py: a small cube thrown at the floor, its
+    velocity and spin scaled by ``speed``."""
     import taichi_mpm as tm
 
     positions, volume = tm.cube((0.45, 0.3, 0.5), 0.2, 5)
-    velocities = tm.rigid_velocity(positions, (0.8, -2.0, 0.3), (2.0, -1.0, 3.0))
+    velocity = [speed * v for v in THROWN_VELOCITY]
+    spin = [speed * w for w in THROWN_SPIN]
+    velocities = tm.rigid_velocity(positions, velocity, spin)
     return tm.Scene(positions, velocities, volume, grid_resolution=16, dt=4e-4, steps=steps)
 
 
 def make_scene(name: str, steps: int):
     import taichi_mpm as tm
 
-    return thrown_scene(steps) if name == "thrown" else tm.paper_scene(steps=steps)
+    if name == "paper":
+        return tm.paper_scene(steps=steps)
+    return thrown_scene(steps, GENTLE if name == "gentle" else 1.0)
 
 
 def observed_steps(steps: int, frames: int) -> np.ndarray:

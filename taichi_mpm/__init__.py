@@ -31,6 +31,7 @@ from taichi_mpm.scene import (
     rigid_velocity_gradient,
     sphere,
 )
+from taichi_mpm.scene_file import load_scene, save_scene
 from taichi_mpm.simulator import Gradients, Simulator
 from taichi_mpm.warmup import warm_up
 
@@ -55,6 +56,8 @@ __all__ = [
     "cube",
     "init",
     "paper_scene",
+    "load_scene",
+    "save_scene",
     "rigid_velocity",
     "rigid_velocity_fit",
     "rigid_velocity_gradient",

@@ -439,6 +439,8 @@ def print_result(
         console.print(_comparison(best.candidate, best.loss, seed))
         findings = summary.get("findings") or {}
         verdict = [f"verdict: {findings['verdict']}"] if findings.get("verdict") else []
+        if (forms := findings.get("identifiability")) and forms.get("sentence"):
+            verdict.append(f"identifiability: {forms['sentence']}")
         for line in [*_truth_lines(findings), *verdict, *as_task(task).screen_lines(findings)]:
             console.print(line)
         if natural := natural_values_of(task, best.code, best.parameters):

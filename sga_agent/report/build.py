@@ -92,6 +92,10 @@ def summary_section(
     lines.append(loss_line(findings))
     if assessment is not None and assessment.verdict:
         lines.append(f"- **verdict**: {assessment.verdict}")
+    if findings.forms is not None:
+        lines.append(f"- **identifiability**: {findings.forms.sentence}")
+    elif findings.forms_error:
+        lines.append(f"- the task could not compare the forms that fit: {findings.forms_error}")
     if task is not None:
         lines += task.summary_lines(view)
     if findings.changed:

@@ -21,9 +21,18 @@ from sga_agent.fingerprint import fingerprint
 from sga_agent.options import options_from_data
 from sga_agent.report.data import Candidate, Run
 from sga_agent.run_store import SEED
-from sga_agent.task import Assessment, Task, as_task, solution_with_parameters
+from sga_agent.task import (
+    Assessment,
+    FormComparison,
+    Task,
+    as_task,
+    solution_with_parameters,
+)
 
 TOP = 3
+#: The best distinct forms handed to the task's ``compare_forms`` (those within its noise run
+#: on its probe scenes).
+FORMS = 6
 
 
 @dataclass
@@ -35,6 +44,8 @@ class Findings:
     best_code: str = ""
     assessment: Assessment | None = None
     assessment_error: str = ""
+    forms: FormComparison | None = None
+    forms_error: str = ""
     top_facts: list[dict[str, Any]] = field(default_factory=list)
     duration_s: float | None = None
     changed: list[str] = field(default_factory=list)  # provenance that differs from the start's
@@ -70,6 +81,8 @@ class Findings:
             "free_run": assessment.get("free_run"),
             "held_out": assessment.get("held_out"),
             "verdict": assessment.get("verdict") or None,
+            "identifiability": self.forms.to_dict() if self.forms else None,
+            "identifiability_error": self.forms_error or None,
             "changed_since_start": self.changed,
             "assessment_error": self.assessment_error or None,
             "molecules": self.top_facts,  # the key summary.json has always had
@@ -134,7 +147,8 @@ def distinct(run: Run, task: Task | None, count: int = TOP) -> list[Candidate]:
 def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True) -> Findings:
     """The findings of ``run``; ``task`` (None when it cannot be loaded) adds what it knows,
     given the run's ``options`` (its options object; None: built from the run's config),
-    ``simulate`` allows its free run. A failing assessment is recorded, not raised."""
+    ``simulate`` allows its free run and the comparison of the forms that fit equally on the
+    task's probe scenes (``compare_forms``). A failing assessment is recorded, not raised."""
     best = run.best
     seed = next((c for c in run.candidates if c.id == SEED), None)
     times = [c.time for c in run.candidates if c.time is not None]
@@ -161,5 +175,11 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
             )
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"
+        if simulate and findings.assessment is not None and not findings.changed:
+            try:
+                findings.forms = assessed.compare_forms(distinct(run, task, FORMS), options,
+                                                        run.path)  # fmt: skip
+            except Exception as error:  # as the assessment's
+                findings.forms_error = f"{type(error).__name__}: {error}"
     findings.top_facts = task.top_facts(distinct(run, task))
     return findings

@@ -19,6 +19,7 @@ forge its score:
   and scores it.
 
 Its modules: :mod:`.records` (settings, evaluations, prompt parts, assessments, parents),
+:mod:`.forms` (whether the data determine a solution's form: :class:`FormComparison`),
 :mod:`.protocol` (:class:`Task`, :class:`TaskBase`, :class:`BuiltinProposer`), :mod:`.code`
 (reading a solution's code without running it: :class:`CodeRejected`), :mod:`.progress` (the
 optional progress notes of a fit: :func:`report_progress`) and :mod:`.report` (the blocks a
@@ -30,6 +31,7 @@ packages can import it cheaply.
 from __future__ import annotations
 
 from sga_agent.task.code import CodeRejected, Problem
+from sga_agent.task.forms import FormComparison, Probe, compared, within_noise
 from sga_agent.task.memory import release_freed_memory
 from sga_agent.task.progress import FitProgress, progress_to, report_progress
 from sga_agent.task.protocol import (
@@ -68,9 +70,9 @@ from sga_agent.task.report import (
 
 __all__ = [
     "DPI", "FONT", "STATUSES", "Assessment", "Block", "BuiltinProposer", "CandidateRecord",
-    "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "FitProgress", "Image",
-    "InvalidSolution", "NoOptions", "Parent", "Problem", "PromptParts", "ReportView", "Section",
-    "Table", "Task", "TaskBase", "TaskKind", "Text", "as_task", "configured",
-    "is_out_of_memory", "options_type", "progress_to", "release_freed_memory",
-    "report_progress", "solution_with_parameters",
+    "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "FitProgress", "FormComparison",
+    "Image", "InvalidSolution", "NoOptions", "Parent", "Probe", "Problem", "PromptParts",
+    "ReportView", "Section", "Table", "Task", "TaskBase", "TaskKind", "Text", "as_task",
+    "compared", "configured", "is_out_of_memory", "options_type", "progress_to",
+    "release_freed_memory", "report_progress", "solution_with_parameters", "within_noise",
 ]  # fmt: skip

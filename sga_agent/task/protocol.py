@@ -9,9 +9,11 @@ protocol package :mod:`sga_agent.task`).
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
+from sga_agent.task.forms import FormComparison
 from sga_agent.task.records import (
     Assessment,
     Evaluation,
@@ -207,6 +209,19 @@ class TaskBase:
         options (an :attr:`options_type` object): the ground truth's name and loss, readable
         derived values and (if ``simulate``) a free run. Trusted code: it must not load or run
         the solution's code, only what the capture recorded. Default: None, nothing to add."""
+        return None
+
+    def compare_forms(
+        self, candidates: Sequence[CandidateRecord], options: Any, folder: Path | None
+    ) -> FormComparison | None:
+        """Whether the data determine the best solution's form (:mod:`sga_agent.task.forms`),
+        given the run's best distinct candidates (best first) and its task options: the forms
+        that fit within the task's noise (:func:`~sga_agent.task.forms.within_noise`) run on
+        probe scenes the task defines (never its held-out scene), their spread measured
+        (:func:`~sga_agent.task.forms.compared`); the separating probe's scene may be written
+        into ``folder`` (the run folder; None: write nothing). Called after :meth:`assess`
+        with ``simulate``; trusted code, as :meth:`assess`. Default: None, the task cannot
+        tell."""
         return None
 
     def describe_assessment(self, simulate: bool) -> str:

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from taichi_mpm.scene import Scene, Walls
+from taichi_mpm.scene import Scene
+from taichi_mpm.scene_file import SCENE_KEYS, scene_arrays, scene_from_arrays
 
 #: Fewest frames (besides t = 0) that make a fit meaningful.
 MIN_FRAMES = 2
@@ -131,36 +132,12 @@ def save_observation(path, observation: Observation) -> Path:
         positions=observation.positions,
         times=observation.times,
         particle_indices=observation.particle_indices,
-        initial_positions=scene.positions,
-        initial_velocities=scene.velocities,
-        particle_volume=scene.particle_volume,
-        density=scene.density,
-        grid_resolution=scene.grid_resolution,
-        domain_size=scene.domain_size,
-        dt=scene.dt,
-        gravity=np.asarray(scene.gravity),
-        walls=scene.walls.kind,
-        wall_thickness=scene.walls.thickness,
-        wall_friction=scene.walls.friction,
+        **scene_arrays(scene),
     )
     return path
 
 
-REQUIRED_KEYS = (
-    "positions",
-    "times",
-    "initial_positions",
-    "initial_velocities",
-    "particle_volume",
-    "density",
-    "grid_resolution",
-    "domain_size",
-    "dt",
-    "gravity",
-    "walls",
-    "wall_thickness",
-    "wall_friction",
-)
+REQUIRED_KEYS = ("positions", "times", *SCENE_KEYS)
 
 
 def load_observation(path) -> Observation:
@@ -182,19 +159,7 @@ def load_observation(path) -> Observation:
             )
         values = {key: data[key] for key in data.files}
     try:
-        scene = Scene(
-            positions=values["initial_positions"],
-            velocities=values["initial_velocities"],
-            particle_volume=float(values["particle_volume"]),
-            density=float(values["density"]),
-            grid_resolution=int(values["grid_resolution"]),
-            domain_size=float(values["domain_size"]),
-            dt=float(values["dt"]),
-            gravity=tuple(float(g) for g in values["gravity"]),
-            walls=Walls(
-                str(values["walls"]), int(values["wall_thickness"]), float(values["wall_friction"])
-            ),
-        )
+        scene = scene_from_arrays(values)
     except (TypeError, ValueError) as error:  # SceneError is a ValueError
         raise ObservationError(f"'{path}' describes an invalid scene: {error}") from error
     return observation_from_times(

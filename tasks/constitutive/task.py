@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 from sga_agent.task import (
     Assessment,
     BuiltinProposer,
+    CandidateRecord,
     Evaluation,
     EvaluationSettings,
+    FormComparison,
     PromptParts,
     ReportView,
     Section,
@@ -144,6 +147,16 @@ class ConstitutiveTask(TaskBase):
         from tasks.constitutive.assessment import assess
 
         return assess(self.spec, artifacts, parameters, options, simulate, self.recorded)
+
+    def compare_forms(
+        self, candidates: Sequence[CandidateRecord], options: ConstitutiveOptions,
+        folder: Path | None,
+    ) -> FormComparison | None:
+        """The distinct forms within 2x of the best loss (or of the true law's own, the float
+        floor), simulated on four probe scenes (see :mod:`tasks.constitutive.forms`)."""
+        from tasks.constitutive.forms import compare_task_forms
+
+        return compare_task_forms(self.spec, candidates, options, folder)
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the true law's loss (cached after the first time)" + (

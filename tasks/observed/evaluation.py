@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,10 +23,17 @@ import torch
 from bridges import laws as torch_laws
 from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Assessment, Evaluation, EvaluationSettings
+from sga_agent.task import (
+    Assessment,
+    CandidateRecord,
+    Evaluation,
+    EvaluationSettings,
+    FormComparison,
+)
 from taichi_mpm.frames import evenly_spaced
+from taichi_mpm.scene import Scene
 from taichi_mpm.sysid.families import FAMILIES, material_family
-from tasks.constitutive import feedback
+from tasks.constitutive import feedback, forms
 from tasks.constitutive.assessment import derived_values
 from tasks.constitutive.evaluation import (
     check_precision,
@@ -39,6 +47,7 @@ from tasks.constitutive.free_sim import fitted_law
 from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law
+from tasks.constitutive.probes import probe_scenes
 from tasks.constitutive.verdict import verdict
 from tasks.observed.data import ObservedData, provenance
 from tasks.observed.options import ObservedOptions
@@ -56,12 +65,12 @@ def known_elastic(options: ObservedOptions, dtype: torch.dtype) -> torch.nn.Modu
 
 
 def rollout_for(
-    law: torch.nn.Module, data: ObservedData, options: ObservedOptions, dtype: torch.dtype
+    law: torch.nn.Module, scene: Scene, options: ObservedOptions, dtype: torch.dtype
 ) -> Rollout:
-    """The observed scene with ``law`` in the searched place."""
+    """``scene`` (the observed one, a probe) with ``law`` in the searched place."""
     if options.searched == "elastic":
-        return Rollout(data.scene, torch_laws.NoPlasticity(), law)
-    return Rollout(data.scene, law, known_elastic(options, dtype))
+        return Rollout(scene, torch_laws.NoPlasticity(), law)
+    return Rollout(scene, law, known_elastic(options, dtype))
 
 
 def trajectory(data: ObservedData) -> Trajectory:
@@ -107,7 +116,7 @@ def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
         law = build_law(data.get("law") if isinstance(data, dict) else None, dtype)
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
-    rollout = rollout_for(law, observed, options, dtype)
+    rollout = rollout_for(law, observed.scene, options, dtype)
     inner = InnerSettings(
         epochs=EPOCHS if settings.epochs is None else settings.epochs,
         learning_rate=settings.learning_rate or LEARNING_RATE,
@@ -198,7 +207,7 @@ def free_run(
     """``law`` simulated from the initial state against the observed particles at the observed
     frames: RMS distance per frame in body sizes, at the last frame and averaged."""
     size, steps = data.body_size, data.scene.steps
-    rollout = rollout_for(law, data, options, dtype)
+    rollout = rollout_for(law, data.scene, options, dtype)
     try:
         simulated = rollout.simulate()
     except (UnstableSimulation, torch.linalg.LinAlgError) as error:
@@ -212,3 +221,19 @@ def free_run(
         steps=steps, frames=data.frame_steps.tolist(), positions=simulated,
         observed=data.positions,
     )  # fmt: skip
+
+
+def compare_forms(
+    candidates: Sequence[CandidateRecord], options: ObservedOptions, folder: Path | None
+) -> FormComparison | None:
+    """:func:`tasks.constitutive.forms.compare_forms` on the observed body: the probes set up
+    like the observation (its grid, walls, gravity, the body's particles); no floor, the best
+    fit's loss is the estimate of the observation's noise."""
+    data, dtype = setup(options)
+    scene = data.scene
+    size = float(np.ptp(scene.positions, axis=0).max())
+    text = f"the observed body ({scene.num_particles} particles, {size:.2g} m across)"
+    probes = probe_scenes(scene, scene.positions, scene.particle_volume, text)
+    return forms.compare_forms(candidates, probes,
+                               lambda law, probe: rollout_for(law, probe, options, dtype),
+                               None, folder)  # fmt: skip

@@ -11,10 +11,19 @@ is the held-out scene of the report's free run.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
-from sga_agent.task import Assessment, BuiltinProposer, Evaluation, EvaluationSettings, PromptParts
+from sga_agent.task import (
+    Assessment,
+    BuiltinProposer,
+    CandidateRecord,
+    Evaluation,
+    EvaluationSettings,
+    FormComparison,
+    PromptParts,
+)
 from tasks.constitutive import prompt_text
 from tasks.constitutive.task import ConstitutiveTask
 from tasks.observed.options import ObservedOptions
@@ -94,6 +103,16 @@ class ObservedTask(ConstitutiveTask):
         from tasks.observed.evaluation import assess
 
         return assess(artifacts, parameters, options, simulate, self.recorded)
+
+    def compare_forms(
+        self, candidates: Sequence[CandidateRecord], options: ObservedOptions,
+        folder: Path | None,
+    ) -> FormComparison | None:
+        """The distinct forms within 2x of the best loss (the observation's noise, as the best
+        fit estimates it), simulated on the observed body's four probe scenes."""
+        from tasks.observed.evaluation import compare_forms
+
+        return compare_forms(candidates, options, folder)
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the hidden truth's loss" + (
