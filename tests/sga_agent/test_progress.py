@@ -153,6 +153,22 @@ def test_the_law_on_the_final_screen_compiles_however_narrow_the_screen(tmp_path
     compile(code, "<screen>", "exec")
 
 
+def test_the_final_screen_says_whether_the_data_determine_the_law(tmp_path):
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=0), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    result = Search(cfg, FakeTask(), Scripted([LAW.format(value=10.0)]), FittedScale(),
+                    store).run()  # fmt: skip
+    sentence = ("the observation does not determine the law: 2 distinct forms fit it within "
+                "the noise, and their motions differ by up to 9 % of the body size")  # fmt: skip
+    findings = {"verdict": "the best law reproduces the motion",
+                "identifiability": {"determined": False, "sentence": sentence}}  # fmt: skip
+    store.save_summary({**store.summary(), "findings": findings})
+    screen = console(WIDTHS[-1])
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    text = " ".join(screen.export_text().split())
+    assert f"verdict: the best law reproduces the motion identifiability: {sentence}" in text
+
+
 def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
     cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
     store = RunStore.create(tmp_path, cfg, {})

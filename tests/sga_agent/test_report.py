@@ -22,7 +22,7 @@ from sga_agent.report.plots import DPI, curves_figure, curves_size, outcomes_fig
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
-from sga_agent.task import STATUSES, Assessment, Evaluation, as_task
+from sga_agent.task import STATUSES, Assessment, Evaluation, Probe, as_task, compared, within_noise
 from tests.sga_agent.test_fidelity import TwoFidelities
 from tests.sga_agent.test_fidelity import config as fidelity_config
 from tests.sga_agent.test_fidelity import law as fidelity_law
@@ -387,6 +387,52 @@ def test_a_report_says_what_changed_since_the_run_started(tmp_path, monkeypatch)
     assert "- **verdict**: the best law does not reproduce the motion" in md
     assert '**changed since the run started** (this report names what the run recorded ' \
         'then): observation_sha256: "aaaa" at the start, "bbbb" now' in md  # fmt: skip
+
+
+class ComparingTask(MeasuredTask):
+    """A task that compares the forms it is handed as a simulation task would: those within
+    twice the best loss part by 9 % under its one probe."""
+
+    handed: list = []
+
+    def with_provenance(self, recorded):
+        return self
+
+    def compare_forms(self, candidates, options, folder):
+        ComparingTask.handed = [(c.id, c.loss) for c in candidates]
+        losses = [c.loss for c in candidates]
+        band = within_noise(losses)
+        probe = Probe("an impact", "the body thrown down", str(folder / "probes" / "impact.npz"))
+        spreads = {"an impact": 0.09} if sum(loss <= band for loss in losses) > 1 else {}
+        return compared([c.id for c in candidates], losses, band, spreads,
+                        {"an impact": probe}, 0.05)  # fmt: skip
+
+
+def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_report(
+    tmp_path, monkeypatch
+):
+    """The task is handed the run's distinct scored forms, best first; what it finds goes
+    into summary.json and the report's summary, in words."""
+    from sga_agent import runner
+
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
+    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
+    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 1.5, 4.0)]
+    runner.run(cfg, store, proposer=Scripted(answers), task=ComparingTask())
+    assert [loss for _, loss in ComparingTask.handed] == [1.0, 1.5, 3.0, 4.0, 5.0, 7.0]
+    found = store.summary()["findings"]["identifiability"]
+    assert found["determined"] is False and found["losses"] == [1.0, 1.5]
+    assert found["probe"]["file"] == str(store.path / "probes" / "impact.npz")
+    assert found["sentence"].startswith("the observation does not determine the law: 2 "
+                                        "distinct forms fit it")  # fmt: skip
+    monkeypatch.setattr("sga_agent.report.build.load_or_none",
+                        lambda name: as_task(ComparingTask()))  # fmt: skip
+    result = CliRunner().invoke(main, ["report", str(store.path)])
+    assert result.exit_code == 0, result.output
+    md = (store.path / "report" / "report.md").read_text()
+    assert f"- **identifiability**: {found['sentence']}" in md
 
 
 class UnstableScreens(TwoFidelities):
