@@ -19,6 +19,7 @@ from sga_agent.report import plots
 from sga_agent.report.candidates import candidates_section
 from sga_agent.report.data import Candidate, Run, Screen, read_run
 from sga_agent.report.findings import TOP, Findings, distinct, find
+from sga_agent.report.front import front_section
 from sga_agent.report.render import Code, Image, Section, Table, Text, write
 from sga_agent.task import STATUSES, ReportView, TaskBase
 from sga_agent.wording import counted, times_below
@@ -227,9 +228,11 @@ def build_report(
         plots.plot_outcomes(run, folder / "outcomes.png"),
     ]
     sections = [summary_section(run, findings, task, view)]
-    for extra in task.report_sections(view) if task is not None else []:
-        sections.append(extra)
-        figures += [folder / b.file for b in extra.blocks if isinstance(b, Image)]
+    own = task.report_sections(view) if task is not None else []
+    for extra in [*own, front_section(run, task, folder, label)]:
+        if extra is not None:
+            sections.append(extra)
+            figures += [folder / b.file for b in extra.blocks if isinstance(b, Image)]
     sections += [
         Section("Bilevel optimisation", [
             Text("Each scored candidate's loss at the constants it was proposed with (open "

@@ -129,6 +129,8 @@ class TaskBase:
     capture_modules: ClassVar[tuple[str, ...]] = ()
     #: What a loss is, for the report's axes ("loss: mean squared position error (m²)").
     loss_label: ClassVar[str] = "loss"
+    #: What :meth:`solution_size` counts, for the report ("operations of the captured law").
+    size_label: ClassVar[str] = "size"
 
     # ------------------------------------------------------------------ solutions
 
@@ -233,6 +235,12 @@ class TaskBase:
         """What makes two recorded candidates the same solution when the report picks the
         top distinct ones (a molecule's SMILES). Default: None, the code with its fitted
         parameters' starting values set to 0."""
+        return None
+
+    def solution_size(self, candidate: CandidateRecord) -> int | None:
+        """How large a recorded candidate's solution is, in the unit :attr:`size_label` names
+        (the operations of a captured law), for the report's loss-versus-size front; from what
+        the capture recorded, never by running its code. Default: None, no front."""
         return None
 
     def top_facts(self, candidates: Sequence[CandidateRecord]) -> list[dict[str, Any]]:

@@ -117,6 +117,24 @@ class LawGraph:
         return cls(parameters, constants, nodes, output)
 
 
+#: Operations that only lay data out (shapes, views, indexing), not counted in a law's size.
+LAYOUT = frozenset({"view", "expand", "sym_size", "getitem", "transpose", "unsqueeze",
+                    "squeeze", "permute", "reshape", "clone", "_to_copy", "alias", "t",
+                    "contiguous", "detach", "lift_fresh_copy"})  # fmt: skip
+
+
+def law_size(data: Any) -> int | None:
+    """The operations of a captured law's graph (``data`` as the capture recorded it) that do
+    more than lay data out (:data:`LAYOUT`); None for data that is no graph. Read only, never
+    run: the size the report's loss-versus-size front ranks laws by."""
+    nodes = data.get("nodes") if isinstance(data, dict) else None
+    if not isinstance(nodes, list):
+        return None
+    names = (str(node.get("op", "")) if isinstance(node, dict) else "" for node in nodes)
+    return sum(name.split(".")[1 if name.startswith("aten.") else -1] not in LAYOUT
+               for name in names)  # fmt: skip
+
+
 def build_law(data: Any, dtype: torch.dtype) -> GraphLaw:
     """The module computing the captured law ``data``, its floats in ``dtype``.
 

@@ -42,6 +42,7 @@ class ConstitutiveTask(TaskBase):
     builtin_options = MappingProxyType({"optimizer": "lbfgs"})
     screens_cheaply = True  # fewer epochs on fewer segments (tasks/constitutive/fidelity.py)
     loss_label = report.LOSS_LABEL
+    size_label = "operations of the captured law, those that only lay data out left out"
     #: Whether the report draws the observation beside the best law's free run.
     draws_motion = True
     #: Whether the scenes are in SI units, so that a modulus or a stress is in Pa.
@@ -157,6 +158,12 @@ class ConstitutiveTask(TaskBase):
         from tasks.constitutive.forms import compare_task_forms
 
         return compare_task_forms(self.spec, candidates, options, folder)
+
+    def solution_size(self, candidate: CandidateRecord) -> int | None:
+        """The operations of the captured law that do more than lay data out."""
+        from tasks.constitutive.law_graph import law_size
+
+        return law_size(((candidate.artifacts() or {}).get("captured") or {}).get("law"))
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the true law's loss (cached after the first time)" + (

@@ -106,3 +106,18 @@ def test_one_law_written_twice_agrees_and_a_linear_law_parts_from_it(tmp_path):
                                                                  key=parted.spreads.get)
     scene = tm.load_scene(parted.probe.file)
     assert Path(parted.probe.file).parent == tmp_path / "probes" and scene.num_particles == 216
+
+
+def test_a_law_s_size_counts_its_operations_and_not_how_it_lays_data_out():
+    """An added term ``+ mu * F`` is two operations (a product and a sum), however many views
+    and broadcasts the capture records for it."""
+    from sga_agent.registry import load_task
+
+    task = load_task("elastic")
+    term = "+ lam * torch.log(J) * eye"
+    bigger = NEO_HOOKEAN.replace(term, term + " + mu * F")
+    assert bigger != NEO_HOOKEAN
+    size, larger = (task.solution_size(Recorded("a", 1.0, task.capture(code)))
+                    for code in (NEO_HOOKEAN, bigger))  # fmt: skip
+    assert larger == size + 2
+    assert task.solution_size(Recorded("b", 1.0, {})) is None  # nothing captured: no size
