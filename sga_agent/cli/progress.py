@@ -448,6 +448,9 @@ def print_result(
         console.print(_solution_label(task, bool(best.parameters)))
         code = solution_with_parameters(task, best.code, best.parameters)
         console.out(code, highlight=False)  # as written: never wrapped, so it can be copied
+        if simple := findings.get("simplified"):
+            console.print(f"simplified: {simple['sentence']}:")
+            console.out(simple["solution"], highlight=False)
     else:
         console.print("no valid solution was found")
     console.print(_counts(recorded.values(), run.screens.values(), result, uses_a_model(config)))

@@ -123,6 +123,11 @@ def summary_section(
         blocks.append(Text("The best solution, its fitted constants written in:" if fitted
                            else "The best solution (nothing fitted):"))  # fmt: skip
         blocks.append(Code(findings.best_code, "python"))
+        if findings.simplified is not None:
+            blocks += [Text(f"Simplified: {findings.simplified.sentence}."),
+                       Code(findings.simplified.solution, "python")]  # fmt: skip
+        elif findings.simplified_error:
+            blocks.append(Text(f"The task could not simplify it: {findings.simplified_error}"))
         derived = assessment.derived if assessment else {}
         if derived:
             blocks.append(Text("What its fitted parameters amount to (computed from the "

@@ -24,6 +24,7 @@ from sga_agent.run_store import SEED
 from sga_agent.task import (
     Assessment,
     FormComparison,
+    Simplified,
     Task,
     as_task,
     solution_with_parameters,
@@ -46,6 +47,8 @@ class Findings:
     assessment_error: str = ""
     forms: FormComparison | None = None
     forms_error: str = ""
+    simplified: Simplified | None = None
+    simplified_error: str = ""
     top_facts: list[dict[str, Any]] = field(default_factory=list)
     duration_s: float | None = None
     changed: list[str] = field(default_factory=list)  # provenance that differs from the start's
@@ -83,6 +86,8 @@ class Findings:
             "verdict": assessment.get("verdict") or None,
             "identifiability": self.forms.to_dict() if self.forms else None,
             "identifiability_error": self.forms_error or None,
+            "simplified": self.simplified.to_dict() if self.simplified else None,
+            "simplified_error": self.simplified_error or None,
             "changed_since_start": self.changed,
             "assessment_error": self.assessment_error or None,
             "molecules": self.top_facts,  # the key summary.json has always had
@@ -181,5 +186,9 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
                                                         run.path)  # fmt: skip
             except Exception as error:  # as the assessment's
                 findings.forms_error = f"{type(error).__name__}: {error}"
+            try:
+                findings.simplified = assessed.simplify(best, options)
+            except Exception as error:  # as the assessment's
+                findings.simplified_error = f"{type(error).__name__}: {error}"
     findings.top_facts = task.top_facts(distinct(run, task))
     return findings

@@ -52,6 +52,7 @@ from sga_agent.task.records import (
     NoOptions,
     Parent,
     PromptParts,
+    Simplified,
     TaskKind,
     is_out_of_memory,
 )
@@ -72,7 +73,7 @@ __all__ = [
     "DPI", "FONT", "STATUSES", "Assessment", "Block", "BuiltinProposer", "CandidateRecord",
     "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "FitProgress", "FormComparison",
     "Image", "InvalidSolution", "NoOptions", "Parent", "Probe", "Problem", "PromptParts",
-    "ReportView", "Section", "Table", "Task", "TaskBase", "TaskKind", "Text", "as_task",
-    "compared", "configured", "is_out_of_memory", "options_type", "progress_to",
+    "ReportView", "Section", "Simplified", "Table", "Task", "TaskBase", "TaskKind", "Text",
+    "as_task", "compared", "configured", "is_out_of_memory", "options_type", "progress_to",
     "release_freed_memory", "report_progress", "solution_with_parameters", "within_noise",
 ]  # fmt: skip

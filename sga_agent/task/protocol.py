@@ -21,6 +21,7 @@ from sga_agent.task.records import (
     NoOptions,
     Parent,
     PromptParts,
+    Simplified,
     TaskKind,
 )
 from sga_agent.task.report import Block, CandidateRecord, ReportView, Section
@@ -224,6 +225,14 @@ class TaskBase:
         into ``folder`` (the run folder; None: write nothing). Called after :meth:`assess`
         with ``simulate``; trusted code, as :meth:`assess`. Default: None, the task cannot
         tell."""
+        return None
+
+    def simplify(self, candidate: CandidateRecord, options: Any) -> Simplified | None:
+        """The run's best solution (``candidate``) with the parts the data do not need dropped:
+        those whose removal, nothing refitted, keeps its loss within the task's noise
+        (:func:`~sga_agent.task.forms.within_noise`); None when nothing can go. Called after
+        :meth:`assess` with ``simulate``; trusted code: it must not run the solution's code.
+        Default: None, not simplified."""
         return None
 
     def describe_assessment(self, simulate: bool) -> str:

@@ -224,3 +224,41 @@ class Parent:
     code: str
     loss: float
     parameters: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Simplified:
+    """The best solution with the parts the data do not need dropped (``Task.simplify``).
+
+    Parameters
+    ----------
+    solution : str
+        The simplified solution, its fitted values written in.
+    dropped : list of str
+        What was dropped, in words ("the term scaled by log_modulus2").
+    loss : float
+        The loss without them, nothing refitted.
+    base_loss : float
+        The loss with them, computed the same way.
+    band : float
+        The loss the noise allows (:func:`~sga_agent.task.within_noise` of ``base_loss``).
+    """
+
+    solution: str
+    dropped: list[str]
+    loss: float
+    base_loss: float
+    band: float
+
+    @property
+    def sentence(self) -> str:
+        """What was dropped and what it cost, in one sentence."""
+        parts = ", ".join(self.dropped)
+        one = len(self.dropped) == 1
+        return (f"{len(self.dropped)} of its parts {'costs' if one else 'cost'} less than the "
+                f"noise and {'is' if one else 'are'} dropped ({parts}): the loss goes from "
+                f"{self.base_loss:.3g} to {self.loss:.3g}, {self.band:.3g} at most")  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"solution": self.solution, "dropped": self.dropped, "loss": self.loss,
+                "base_loss": self.base_loss, "band": self.band, "sentence": self.sentence}

@@ -22,14 +22,20 @@ import taichi_mpm as tm
 from bridges import laws as torch_laws
 from bridges.rollout import Rollout, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Assessment
-from tasks.constitutive.evaluation import check_precision, ensure_runtime, ground_truth
+from sga_agent.task import Assessment, CandidateRecord, Simplified
+from tasks.constitutive.evaluation import (
+    check_precision,
+    ensure_runtime,
+    ground_truth,
+    task_rollout,
+)
 from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.free_sim import fitted_law, free_run_in
 from tasks.constitutive.ground_truth import cache_dir, cache_key
 from tasks.constitutive.held_out import held_out_error
 from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target
 from tasks.constitutive.options import ConstitutiveOptions
+from tasks.constitutive.simplify import simplify
 from tasks.constitutive.specs import ConstitutiveSpec
 from tasks.constitutive.verdict import verdict
 
@@ -51,13 +57,40 @@ def truth_loss(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> float:
     except (OSError, KeyError, ValueError, TypeError):
         pass  # not computed yet (or unreadable): compute it again
     plastic, elastic = torch_laws.from_material(spec.material(), torch_dtype())
-    rollout = Rollout(scene, plastic.requires_grad_(False), elastic.requires_grad_(False))
-    loss = trajectory_loss(rollout, observed.positions, observed.states, spec.reset_every,
-                           backward=False, batch=len(observed.states["x"])).loss  # fmt: skip
+    loss = scored_loss(spec, Rollout(scene, plastic.requires_grad_(False),
+                                     elastic.requires_grad_(False)), options)  # fmt: skip
     partial = path.with_suffix(f".{os.getpid()}.tmp")
     partial.write_text(json.dumps({"loss": loss}) + "\n")
     partial.replace(path)
     return loss
+
+
+def scored_loss(spec: ConstitutiveSpec, rollout: Rollout, options: ConstitutiveOptions) -> float:
+    """The loss of ``rollout``'s laws as every candidate is scored (teacher forcing every
+    ``reset_every`` steps of the observation, no fitting)."""
+    observed = ground_truth(spec, options.steps)
+    return trajectory_loss(rollout, observed.positions, observed.states, spec.reset_every,
+                           backward=False, batch=len(observed.states["x"])).loss  # fmt: skip
+
+
+def simplified(
+    spec: ConstitutiveSpec, candidate: CandidateRecord, options: ConstitutiveOptions
+) -> Simplified | None:
+    """The candidate's law with the terms the observation does not need dropped
+    (:func:`tasks.constitutive.simplify.simplify`), each drop scored on its captured graph
+    at its fitted values; the floor is the true law's own loss."""
+    graph = ((candidate.artifacts() or {}).get("captured") or {}).get("law")
+    if graph is None:
+        return None
+    ensure_runtime(options.precision or "float32")
+    scene = tm.paper_scene(steps=ground_truth(spec, options.steps).positions.shape[0] - 1)
+
+    def loss_of(parameters: dict[str, float]) -> float:
+        law = fitted_law(graph, parameters, torch_dtype())
+        return scored_loss(spec, task_rollout(spec, law, scene), options)
+
+    return simplify(candidate.code, spec.searched, candidate.parameters, loss_of,
+                    truth_loss(spec, options))  # fmt: skip
 
 
 def free_run(

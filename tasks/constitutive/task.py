@@ -23,6 +23,7 @@ from sga_agent.task import (
     PromptParts,
     ReportView,
     Section,
+    Simplified,
     TaskBase,
 )
 from tasks.constitutive import prompt_text, report
@@ -158,6 +159,18 @@ class ConstitutiveTask(TaskBase):
         from tasks.constitutive.forms import compare_task_forms
 
         return compare_task_forms(self.spec, candidates, options, folder)
+
+    def simplify(
+        self, candidate: CandidateRecord, options: ConstitutiveOptions
+    ) -> Simplified | None:
+        """A genetic-programming law with the terms whose removal costs less than the noise
+        dropped (see :mod:`tasks.constitutive.simplify`); a model's law is not simplified."""
+        from tasks.constitutive.assessment import simplified
+
+        found = simplified(self.spec, candidate, options)
+        if found is not None:
+            found.solution = self.solution_with_parameters(found.solution, {})
+        return found
 
     def solution_size(self, candidate: CandidateRecord) -> int | None:
         """The operations of the captured law that do more than lay data out."""

@@ -29,6 +29,7 @@ from sga_agent.task import (
     Evaluation,
     EvaluationSettings,
     FormComparison,
+    Simplified,
 )
 from taichi_mpm.frames import evenly_spaced
 from taichi_mpm.scene import Scene
@@ -48,6 +49,7 @@ from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
 from tasks.constitutive.law_graph import LawGraphError, build_law
 from tasks.constitutive.probes import probe_scenes
+from tasks.constitutive.simplify import simplify
 from tasks.constitutive.verdict import verdict
 from tasks.observed.data import ObservedData, provenance
 from tasks.observed.options import ObservedOptions
@@ -237,3 +239,21 @@ def compare_forms(
     return forms.compare_forms(candidates, probes,
                                lambda law, probe: rollout_for(law, probe, options, dtype),
                                None, folder)  # fmt: skip
+
+
+def simplified(candidate: CandidateRecord, options: ObservedOptions) -> Simplified | None:
+    """The candidate's law with the terms the observation does not need dropped
+    (:func:`tasks.constitutive.simplify.simplify`), each drop scored as the fit scores a law
+    (a free rollout against the observed frames, no fitting); the noise is the best loss's."""
+    graph = ((candidate.artifacts() or {}).get("captured") or {}).get("law")
+    if graph is None:
+        return None
+    data, dtype = setup(options)
+    observed = trajectory(data)
+
+    def loss_of(parameters: dict[str, float]) -> float:
+        rollout = rollout_for(fitted_law(graph, parameters, dtype), data.scene, options, dtype)
+        return trajectory_loss(rollout, observed.positions, None, options.segment,
+                               backward=False, weights=observed.weights).loss  # fmt: skip
+
+    return simplify(candidate.code, options.searched, candidate.parameters, loss_of)

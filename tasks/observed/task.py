@@ -23,6 +23,7 @@ from sga_agent.task import (
     EvaluationSettings,
     FormComparison,
     PromptParts,
+    Simplified,
 )
 from tasks.constitutive import prompt_text
 from tasks.constitutive.task import ConstitutiveTask
@@ -113,6 +114,15 @@ class ObservedTask(ConstitutiveTask):
         from tasks.observed.evaluation import compare_forms
 
         return compare_forms(candidates, options, folder)
+
+    def simplify(self, candidate: CandidateRecord, options: ObservedOptions) -> Simplified | None:
+        """As the constitutive tasks', each drop scored as the fit scores a law."""
+        from tasks.observed.evaluation import simplified
+
+        found = simplified(candidate, options)
+        if found is not None:
+            found.solution = self.solution_with_parameters(found.solution, {})
+        return found
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the hidden truth's loss" + (

@@ -160,13 +160,18 @@ def test_the_final_screen_says_whether_the_data_determine_the_law(tmp_path):
                     store).run()  # fmt: skip
     sentence = ("the observation does not determine the law: 2 distinct forms fit it within "
                 "the noise, and their motions differ by up to 9 % of the body size")  # fmt: skip
+    simpler = "class Physics:\n    " + "x = 1  # a line longer than the screen " * 4 + "\n"
     findings = {"verdict": "the best law reproduces the motion",
-                "identifiability": {"determined": False, "sentence": sentence}}  # fmt: skip
+                "identifiability": {"determined": False, "sentence": sentence},
+                "simplified": {"sentence": "1 of its parts costs less than the noise",
+                               "solution": simpler}}  # fmt: skip
     store.save_summary({**store.summary(), "findings": findings})
-    screen = console(WIDTHS[-1])
+    screen = console(WIDTHS[0])
     print_result(screen, store, result, False, ElasticTask(), cfg)
-    text = " ".join(screen.export_text().split())
-    assert f"verdict: the best law reproduces the motion identifiability: {sentence}" in text
+    text = screen.export_text()
+    flat = " ".join(text.split())
+    assert f"verdict: the best law reproduces the motion identifiability: {sentence}" in flat
+    assert "simplified: 1 of its parts costs less than the noise:\n" + simpler in text
 
 
 def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):

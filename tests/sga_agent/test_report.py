@@ -22,7 +22,16 @@ from sga_agent.report.plots import DPI, curves_figure, curves_size, outcomes_fig
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
 from sga_agent.search import Search
-from sga_agent.task import STATUSES, Assessment, Evaluation, Probe, as_task, compared, within_noise
+from sga_agent.task import (
+    STATUSES,
+    Assessment,
+    Evaluation,
+    Probe,
+    Simplified,
+    as_task,
+    compared,
+    within_noise,
+)
 from tests.sga_agent.test_fidelity import TwoFidelities
 from tests.sga_agent.test_fidelity import config as fidelity_config
 from tests.sga_agent.test_fidelity import law as fidelity_law
@@ -407,6 +416,9 @@ class ComparingTask(MeasuredTask):
         return compared([c.id for c in candidates], losses, band, spreads,
                         {"an impact": probe}, 0.05)  # fmt: skip
 
+    def simplify(self, candidate, options):
+        return Simplified(f"# {candidate.id}, simpler\n", ["its second term"], 1.2, 1.0, 2.0)
+
 
 def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_report(
     tmp_path, monkeypatch
@@ -433,6 +445,11 @@ def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_repo
     assert result.exit_code == 0, result.output
     md = (store.path / "report" / "report.md").read_text()
     assert f"- **identifiability**: {found['sentence']}" in md
+    simplified = store.summary()["findings"]["simplified"]
+    assert simplified["solution"] == "# 02-exploit-00, simpler\n"  # the best's
+    assert ("Simplified: 1 of its parts costs less than the noise and is dropped (its second "
+            "term): the loss goes from 1 to 1.2, 2 at most.\n\n```python\n# 02-exploit-00, "
+            "simpler\n```") in md  # fmt: skip
 
 
 class UnstableScreens(TwoFidelities):
