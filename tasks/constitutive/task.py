@@ -181,7 +181,8 @@ class ConstitutiveTask(TaskBase):
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the true law's loss (cached after the first time)" + (
             " and the free runs on the training and the held-out scene (the first run compiles "
-            "Taichi's kernels and simulates the held-out ground truth: up to two minutes)"
+            "Taichi's kernels and simulates the held-out ground truth: up to two minutes), then "
+            "the forms that fit as well on four probe scenes"
             if simulate
             else ""
         )

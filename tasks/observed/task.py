@@ -126,7 +126,8 @@ class ObservedTask(ConstitutiveTask):
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the hidden truth's loss" + (
-            " and the free runs on the observation and the validation file (if given)"
+            " and the free runs on the observation and the validation file (if given), then "
+            "the forms that fit as well on four probe scenes"
             if simulate
             else ""
         )
