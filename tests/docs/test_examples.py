@@ -135,14 +135,15 @@ SHORT_ELASTIC_SEARCH = ["search", "--task", "elastic", "--option", "steps=200", 
 @pytest.mark.slow
 def test_the_short_elastic_search_of_the_tasks_page(tmp_path: Path):
     """The page's command ends with the lines the page shows: the best's ratio to the seed and
-    the truth's, the verdict and the two free runs."""
+    the truth's, the verdict, whether the observation determines the law and the two free
+    runs."""
     command = " ".join(["sga-agent", *SHORT_ELASTIC_SEARCH])
     assert command in " ".join((DOCS / "tasks.md").read_text("utf-8").replace("\\\n", " ").split())
     output = run([sys.executable, "-m", "sga_agent", *SHORT_ELASTIC_SEARCH, "--out-dir",
                   str(tmp_path)], env=environment(COLUMNS="400"))  # fmt: skip
-    parts = ("best:", "ground truth:", "verdict:", "free run of the best")
+    parts = ("best:", "ground truth:", "verdict:", "identifiability:", "free run of the best")
     lines = [line.rstrip() for line in output.splitlines() if line.startswith(parts)]
-    assert len(lines) == 5, output
+    assert len(lines) == 6, output
     shown_lines = "\n".join(lines)
     assert_shown_on_the_site("elastic_verdict", shown_lines, numbers=True)
 
