@@ -286,14 +286,15 @@ def _identifiability(found: dict[str, Any] | None) -> dict[str, Any] | None:
 
 
 def _identified(record: dict[str, Any]) -> str:
-    """The identifiability column: "1 form", "3 forms agree (0.2 %)", "not determined: 3
-    forms, 9.7 % under a stronger impact" ("-" for a row run before it was recorded)."""
+    """The identifiability column: "singled out" (no other form within the noise), "3 forms
+    agree (0.2 %)", "not determined: 3 forms, 9.7 % under a stronger impact" ("-" for a row
+    run before it was recorded)."""
     found = record.get("identifiability")
     if not found:
         return "-"
     spreads = [float(value) for value in found["spreads"].values()]
     if found["forms"] < 2:
-        return "1 form"
+        return "singled out"
     if found["determined"]:
         return f"{found['forms']} forms agree ({_percent(max(spreads))})"
     spread = found["spreads"][found["probe"]]

@@ -46,9 +46,18 @@ def with_fitted_values(code: str, parameters: Mapping[str, float]) -> str:
             if not isinstance(value, int | float) or not math.isfinite(value):
                 continue
             target = defaults.get(start.id) if isinstance(start, ast.Name) else start
-            if isinstance(target, ast.Constant) and isinstance(target.value, int | float):
+            if _is_number(target):
                 edits[_span(target)] = _number(float(value))
     return _apply(code, edits)
+
+
+def _is_number(node: ast.expr | None) -> bool:
+    """Whether ``node`` is a number literal, signed or not (``-0.63`` is a unary minus on a
+    constant in the syntax tree)."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
+        node = node.operand
+    return (isinstance(node, ast.Constant) and isinstance(node.value, int | float)
+            and not isinstance(node.value, bool))  # fmt: skip
 
 
 def _initialisers(tree: ast.Module) -> list[ast.FunctionDef]:

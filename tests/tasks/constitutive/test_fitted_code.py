@@ -58,6 +58,29 @@ class Physics(nn.Module):
     assert with_fitted_values("not python (", {"k": 1.0}) == "not python ("
 
 
+def test_negative_starting_values_are_rewritten_too():
+    """A log of a small constant starts below zero; ``-0.63`` is a minus applied to 0.63 in the
+    syntax tree, and was left as proposed (the README's law showed its start, not its fit)."""
+    code = '''import torch
+import torch.nn as nn
+
+
+class Physics(nn.Module):
+    def __init__(self, log_k: float = -0.6285, w: float = +1.0):
+        super().__init__()
+        self.log_k = nn.Parameter(torch.tensor(log_k))
+        self.w = nn.Parameter(torch.tensor(w))
+        self.c = nn.Parameter(torch.tensor(-2.5))
+
+    def forward(self, F):
+        return F * self.w * torch.exp(self.log_k + self.c)
+'''
+    shown = with_fitted_values(code, {"log_k": -0.6241908, "w": 0.9, "c": 3.0})
+    assert "log_k: float = -0.6241908, w: float = 0.9" in shown
+    assert "torch.tensor(3.0)" in shown
+    assert parameter_values(shown) == pytest.approx({"log_k": -0.6241908, "w": 0.9, "c": 3.0})
+
+
 @pytest.mark.slow
 def test_the_task_drops_the_stale_genome_tag_of_a_gp_law():
     code = gp_law()
