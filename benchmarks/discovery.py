@@ -268,7 +268,9 @@ def run_row(args: argparse.Namespace) -> None:
         "identifiability": _identifiability(findings.get("identifiability")),
     }  # fmt: skip
     if row.observation:
-        record |= {"observed_scene": OBSERVED_SCENE, "observed_steps": OBSERVED_STEPS}
+        scene, steps = (row.scene[1], int(row.scene[3])) if row.scene else (OBSERVED_SCENE,
+                                                                             OBSERVED_STEPS)
+        record |= {"observed_scene": scene, "observed_steps": steps}
     results = Path(args.results)
     results.parent.mkdir(parents=True, exist_ok=True)
     with results.open("a") as out:

@@ -439,9 +439,12 @@ def print_result(
         console.print(_comparison(best.candidate, best.loss, seed))
         findings = summary.get("findings") or {}
         verdict = [f"verdict: {findings['verdict']}"] if findings.get("verdict") else []
+        for line in [*_truth_lines(findings), *verdict]:
+            console.print(line)
         if (forms := findings.get("identifiability")) and forms.get("sentence"):
-            verdict.append(f"identifiability: {forms['sentence']}")
-        for line in [*_truth_lines(findings), *verdict, *as_task(task).screen_lines(findings)]:
+            # one line however long: it ends with a scene file's path, which must not break
+            console.print(f"identifiability: {forms['sentence']}", soft_wrap=True)
+        for line in as_task(task).screen_lines(findings):
             console.print(line)
         if natural := natural_values_of(task, best.code, best.parameters):
             console.print("fitted, in natural units: " + "; ".join(map(str, natural.values())))

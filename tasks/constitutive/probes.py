@@ -66,10 +66,8 @@ def probe_scenes(base: tm.Scene, body: np.ndarray, volume: float, body_text: str
         ("a collapse under its own weight", resting, zero,
          "at rest one cell above the floor, left to fall and settle"),
     ]  # fmt: skip
-    gravity = ", ".join(f"{g:g}" for g in base.gravity)
-    setting = (f"for {DURATION:g} s ({steps} steps of {base.dt:g} s) in the training scene's "
-               f"set-up ({base.domain_size:g} m domain, {base.grid_resolution}^3 cells, "
-               f"{base.walls.kind} walls, gravity ({gravity}) m/s^2)")  # fmt: skip
+    setting = (f"for {DURATION:g} s ({steps} steps of {base.dt:g} s) on the training scene's "
+               "grid, walls and gravity")  # fmt: skip
     probes = []
     for name, positions, velocities, motion in setups:
         try:

@@ -169,8 +169,7 @@ def test_the_final_screen_says_whether_the_data_determine_the_law(tmp_path):
     screen = console(WIDTHS[0])
     print_result(screen, store, result, False, ElasticTask(), cfg)
     text = screen.export_text()
-    flat = " ".join(text.split())
-    assert f"verdict: the best law reproduces the motion identifiability: {sentence}" in flat
+    assert f"verdict: the best law reproduces the motion\nidentifiability: {sentence}\n" in text
     assert "simplified: 1 of its parts costs less than the noise:\n" + simpler in text
 
 
