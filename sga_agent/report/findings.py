@@ -166,6 +166,7 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
     if task is None:
         return findings
     task = as_task(task)
+    forms = distinct(run, task, FORMS)  # each candidate's key computed once
     if best is not None:
         try:
             if options is None:
@@ -182,13 +183,12 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
             findings.assessment_error = f"{type(error).__name__}: {error}"
         if simulate and findings.assessment is not None and not findings.changed:
             try:
-                findings.forms = assessed.compare_forms(distinct(run, task, FORMS), options,
-                                                        run.path)  # fmt: skip
+                findings.forms = assessed.compare_forms(forms, options, run.path)
             except Exception as error:  # as the assessment's
                 findings.forms_error = f"{type(error).__name__}: {error}"
             try:
                 findings.simplified = assessed.simplify(best, options)
             except Exception as error:  # as the assessment's
                 findings.simplified_error = f"{type(error).__name__}: {error}"
-    findings.top_facts = task.top_facts(distinct(run, task))
+    findings.top_facts = task.top_facts(forms[:TOP])  # the first TOP distinct ones
     return findings

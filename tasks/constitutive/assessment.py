@@ -33,7 +33,7 @@ from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.free_sim import fitted_law, free_run_in
 from tasks.constitutive.ground_truth import cache_dir, cache_key
 from tasks.constitutive.held_out import held_out_error
-from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target
+from tasks.constitutive.law_graph import LawGraph, LawGraphError, _target, captured_graph
 from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.simplify import simplify
 from tasks.constitutive.specs import ConstitutiveSpec
@@ -79,7 +79,7 @@ def simplified(
     """The candidate's law with the terms the observation does not need dropped
     (:func:`tasks.constitutive.simplify.simplify`), each drop scored on its captured graph
     at its fitted values; the floor is the true law's own loss."""
-    graph = ((candidate.artifacts() or {}).get("captured") or {}).get("law")
+    graph = captured_graph(candidate.artifacts())
     if graph is None:
         return None
     ensure_runtime(options.precision or "float32")
@@ -255,7 +255,7 @@ def assess(
     are another material's).
     """
     check_precision(options.precision)
-    graph = ((artifacts or {}).get("captured") or {}).get("law")
+    graph = captured_graph(artifacts)
     if recorded is not None and recorded.get("truth", spec.truth_name) != spec.truth_name:
         return Assessment(truth=str(recorded["truth"]), verdict=STALE)
     found = Assessment(truth=spec.truth_name, truth_loss=truth_loss(spec, options))

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -21,6 +20,7 @@ from bridges.step import torch_dtype
 from sga_agent.task import CandidateRecord, FormComparison, compared, within_noise
 from tasks.constitutive.evaluation import ensure_runtime, task_rollout
 from tasks.constitutive.free_sim import fitted_law
+from tasks.constitutive.law_graph import captured_graph
 from tasks.constitutive.options import ConstitutiveOptions
 from tasks.constitutive.probes import ProbeScene, probe_scenes, probe_spreads, written
 from tasks.constitutive.specs import ConstitutiveSpec
@@ -53,7 +53,8 @@ def compare_forms(
     noise (:func:`~sga_agent.task.within_noise` of ``floor``): each rebuilt and simulated on
     ``probes`` in the scene ``rollout(law, scene)`` sets up. None with fewer than two scored
     forms."""
-    scored = [c for c in candidates if math.isfinite(c.loss) and _graph(c) is not None]
+    graphs = {c.id: captured_graph(c.artifacts()) for c in candidates}  # read once each
+    scored = [c for c in candidates if math.isfinite(c.loss) and graphs[c.id] is not None]
     if len(scored) < 2:
         return None
     losses = [c.loss for c in scored]
@@ -62,7 +63,7 @@ def compare_forms(
     spreads: dict[str, float] = {}
     if len(fitting) > 1:
         dtype = torch_dtype()
-        laws = [fitted_law(_graph(c), c.parameters, dtype) for c in fitting]
+        laws = [fitted_law(graphs[c.id], c.parameters, dtype) for c in fitting]
         spreads = probe_spreads(laws, probes, lambda law, scene: _motion(rollout(law, scene)))
     words = {probe.probe.name: probe for probe in probes}
     found = compared([c.id for c in scored], losses, band, spreads,
@@ -87,10 +88,6 @@ def compare_task_forms(
     return compare_forms(candidates, cube_probes(tm.paper_scene(steps=1)),
                          lambda law, scene: task_rollout(spec, law, scene),
                          truth_loss(spec, options), folder)  # fmt: skip
-
-
-def _graph(candidate: CandidateRecord) -> Any:
-    return ((candidate.artifacts() or {}).get("captured") or {}).get("law")
 
 
 def _motion(rollout: Rollout) -> np.ndarray | None:

@@ -123,6 +123,12 @@ LAYOUT = frozenset({"view", "expand", "sym_size", "getitem", "transpose", "unsqu
                     "contiguous", "detach", "lift_fresh_copy"})  # fmt: skip
 
 
+def captured_graph(artifacts: dict[str, Any] | None) -> Any:
+    """The law's graph in what an evaluation left for reports (``{"captured": {"law": ...}}``),
+    or None: data as the capture recorded it, not yet checked."""
+    return ((artifacts or {}).get("captured") or {}).get("law")
+
+
 def law_size(data: Any) -> int | None:
     """The operations of a captured law's graph (``data`` as the capture recorded it) that do
     more than lay data out (:data:`LAYOUT`); None for data that is no graph. Read only, never

@@ -165,18 +165,22 @@ class ConstitutiveTask(TaskBase):
     ) -> Simplified | None:
         """A genetic-programming law with the terms whose removal costs less than the noise
         dropped (see :mod:`tasks.constitutive.simplify`); a model's law is not simplified."""
-        from tasks.constitutive.assessment import simplified
-
-        found = simplified(self.spec, candidate, options)
-        if found is not None:
+        found = self._simplified(candidate, options)
+        if found is not None:  # its code without the genome tag
             found.solution = self.solution_with_parameters(found.solution, {})
         return found
 
+    def _simplified(self, candidate: CandidateRecord, options: Any) -> Simplified | None:
+        """:meth:`simplify`'s law, each drop scored as this task scores a candidate."""
+        from tasks.constitutive.assessment import simplified
+
+        return simplified(self.spec, candidate, options)
+
     def solution_size(self, candidate: CandidateRecord) -> int | None:
         """The operations of the captured law that do more than lay data out."""
-        from tasks.constitutive.law_graph import law_size
+        from tasks.constitutive.law_graph import captured_graph, law_size
 
-        return law_size(((candidate.artifacts() or {}).get("captured") or {}).get("law"))
+        return law_size(captured_graph(candidate.artifacts()))
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the true law's loss (cached after the first time)" + (

@@ -47,7 +47,7 @@ from tasks.constitutive.free_run import FreeRun
 from tasks.constitutive.free_sim import fitted_law
 from tasks.constitutive.ground_truth import Trajectory
 from tasks.constitutive.inner import InnerSettings
-from tasks.constitutive.law_graph import LawGraphError, build_law
+from tasks.constitutive.law_graph import LawGraphError, build_law, captured_graph
 from tasks.constitutive.probes import probe_scenes
 from tasks.constitutive.simplify import simplify
 from tasks.constitutive.verdict import verdict
@@ -183,7 +183,7 @@ def assess(
         observed = trajectory(data)
         found.truth_loss = trajectory_loss(rollout, observed.positions, None, options.segment,
                                            backward=False, weights=observed.weights).loss
-    graph = ((artifacts or {}).get("captured") or {}).get("law")
+    graph = captured_graph(artifacts)
     if graph is None:
         return found
     found.derived = derived_values(graph, parameters)
@@ -245,7 +245,7 @@ def simplified(candidate: CandidateRecord, options: ObservedOptions) -> Simplifi
     """The candidate's law with the terms the observation does not need dropped
     (:func:`tasks.constitutive.simplify.simplify`), each drop scored as the fit scores a law
     (a free rollout against the observed frames, no fitting); the noise is the best loss's."""
-    graph = ((candidate.artifacts() or {}).get("captured") or {}).get("law")
+    graph = captured_graph(candidate.artifacts())
     if graph is None:
         return None
     data, dtype = setup(options)

@@ -115,14 +115,13 @@ class ObservedTask(ConstitutiveTask):
 
         return compare_forms(candidates, options, folder)
 
-    def simplify(self, candidate: CandidateRecord, options: ObservedOptions) -> Simplified | None:
-        """As the constitutive tasks', each drop scored as the fit scores a law."""
+    def _simplified(
+        self, candidate: CandidateRecord, options: ObservedOptions
+    ) -> Simplified | None:
+        """Each drop scored as the fit scores a law (a free rollout, no teacher forcing)."""
         from tasks.observed.evaluation import simplified
 
-        found = simplified(candidate, options)
-        if found is not None:
-            found.solution = self.solution_with_parameters(found.solution, {})
-        return found
+        return simplified(candidate, options)
 
     def describe_assessment(self, simulate: bool) -> str:
         return "assessing the best solution: the hidden truth's loss" + (

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 
 import pytest
@@ -11,8 +10,8 @@ from click.testing import CliRunner
 from sga_agent.cli import main
 from sga_agent.report.data import Candidate
 from sga_agent.report.front import front
-from sga_agent.run_store import RunStore
-from tests.sga_agent.test_search import LAW, FakeTask, LossInCode, Scripted, config
+from tests.sga_agent.test_report import run_through_the_runner
+from tests.sga_agent.test_search import FakeTask
 
 
 def solutions(*pairs: tuple[int, float]) -> list[tuple[Candidate, int]]:
@@ -39,15 +38,10 @@ class SizedTask(FakeTask):
 
 
 def test_a_task_with_sizes_gets_the_front_in_its_report(tmp_path, monkeypatch):
-    from sga_agent import runner
     from sga_agent.task import as_task
 
-    cfg = config()
-    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
-    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
-    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
-    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
-    runner.run(cfg, store, proposer=Scripted(answers), task=SizedTask())
+    store = run_through_the_runner(tmp_path, monkeypatch, SizedTask(),
+                                   (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
     monkeypatch.setattr("sga_agent.report.build.load_or_none", lambda name: as_task(SizedTask()))
     result = CliRunner().invoke(main, ["report", str(store.path), "--no-motion"])
     assert result.exit_code == 0, result.output

@@ -347,6 +347,20 @@ class _Run:
         return {"final_error": self.error, "scene": "held-out scene"}
 
 
+def run_through_the_runner(tmp_path, monkeypatch, task, values) -> RunStore:
+    """A search of ``task`` run as the CLI runs it (findings and provenance included), its
+    answers the fake laws of ``values``, scored by the loss written in their code."""
+    from sga_agent import runner
+
+    cfg = config()
+    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
+    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
+    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
+    answers = [LAW.format(value=v) for v in values]
+    runner.run(cfg, store, proposer=Scripted(answers), task=task)
+    return store
+
+
 class MeasuredTask(FakeTask):
     """A task that records what it is measured against (a file's hash) and assesses with
     what was recorded: the double of a task whose observation file can change."""
@@ -370,14 +384,9 @@ def test_a_report_says_what_changed_since_the_run_started(tmp_path, monkeypatch)
     """The runner records the task's provenance when the search starts; the findings hand
     it back to the task (``with_provenance``) and list what differs from the task's now; the
     held-out record and the verdict reach summary.json and the report."""
-    from sga_agent import runner
 
-    cfg = config()
-    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
-    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
-    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
-    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
-    runner.run(cfg, store, proposer=Scripted(answers), task=MeasuredTask())
+    store = run_through_the_runner(tmp_path, monkeypatch, MeasuredTask(),
+                                   (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
     assert store.provenance() == {"observation_sha256": "aaaa"}
     findings = store.summary()["findings"]
     assert findings["held_out"] == {"final_error": 0.25, "scene": "held-out scene"}
@@ -425,14 +434,9 @@ def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_repo
 ):
     """The task is handed the run's distinct scored forms, best first; what it finds goes
     into summary.json and the report's summary, in words."""
-    from sga_agent import runner
 
-    cfg = config()
-    store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
-    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
-    monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
-    answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 1.5, 4.0)]
-    runner.run(cfg, store, proposer=Scripted(answers), task=ComparingTask())
+    store = run_through_the_runner(tmp_path, monkeypatch, ComparingTask(),
+                                   (5.0, 3.0, 7.0, 1.0, 1.5, 4.0))  # fmt: skip
     assert [loss for _, loss in ComparingTask.handed] == [1.0, 1.5, 3.0, 4.0, 5.0, 7.0]
     found = store.summary()["findings"]["identifiability"]
     assert found["determined"] is False and found["losses"] == [1.0, 1.5]
