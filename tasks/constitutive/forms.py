@@ -22,7 +22,13 @@ from tasks.constitutive.evaluation import ensure_runtime, task_rollout
 from tasks.constitutive.free_sim import fitted_law
 from tasks.constitutive.law_graph import captured_graph
 from tasks.constitutive.options import ConstitutiveOptions
-from tasks.constitutive.probes import ProbeScene, probe_scenes, probe_spreads, written
+from tasks.constitutive.probes import (
+    DURATION,
+    ProbeScene,
+    probe_scenes,
+    probe_spreads,
+    written,
+)
 from tasks.constitutive.specs import ConstitutiveSpec
 from tasks.constitutive.verdict import THRESHOLDS
 
@@ -35,11 +41,21 @@ THRESHOLD = THRESHOLDS.reproduces
 CUBE_SIDE, CUBE_PER_SIDE = 0.3, 6
 
 
-def cube_probes(base: tm.Scene) -> list[ProbeScene]:
-    """The probes of the constitutive tasks: :data:`CUBE_SIDE` cube on ``base``'s set-up."""
+def cube_probes(base: tm.Scene, duration: float = DURATION) -> list[ProbeScene]:
+    """The probes of the constitutive tasks: :data:`CUBE_SIDE` cube on ``base``'s set-up,
+    ``duration`` seconds long."""
     body, volume = tm.cube((0.5, 0.5, 0.5), CUBE_SIDE, CUBE_PER_SIDE)
     text = f"a cube of side {CUBE_SIDE:g} m ({len(body)} particles)"
-    return probe_scenes(base, body, volume, text)
+    return probe_scenes(base, body, volume, text, duration)
+
+
+def probe_duration(spec: ConstitutiveSpec, options: ConstitutiveOptions) -> float:
+    """How long the probes of a run with ``options`` last: :data:`DURATION`, shortened in
+    proportion where ``--option steps`` shortens the training scene (as the held-out scene
+    is, :func:`~tasks.constitutive.held_out.held_out_steps`)."""
+    if options.steps is None:
+        return DURATION
+    return DURATION * min(1.0, options.steps / spec.steps)
 
 
 def compare_forms(
@@ -80,12 +96,13 @@ def compare_task_forms(
     folder: Path | None,
 ) -> FormComparison | None:
     """:func:`compare_forms` for a constitutive task: the cube probes on the paper scene's
-    set-up, the floor the true law's own loss (an exact observation's noise is float
-    precision, which the true law's loss measures)."""
+    set-up (:func:`probe_duration` long), the floor the true law's own loss (an exact
+    observation's noise is float precision, which the true law's loss measures)."""
     from tasks.constitutive.assessment import truth_loss
 
     ensure_runtime(options.precision or "float32")
-    return compare_forms(candidates, cube_probes(tm.paper_scene(steps=1)),
+    probes = cube_probes(tm.paper_scene(steps=1), probe_duration(spec, options))
+    return compare_forms(candidates, probes,
                          lambda law, scene: task_rollout(spec, law, scene),
                          truth_loss(spec, options), folder)  # fmt: skip
 

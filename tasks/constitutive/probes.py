@@ -39,12 +39,14 @@ class ProbeScene:
     scene: tm.Scene
 
 
-def probe_scenes(base: tm.Scene, body: np.ndarray, volume: float, body_text: str) -> list[
-        ProbeScene]:  # fmt: skip
+def probe_scenes(
+    base: tm.Scene, body: np.ndarray, volume: float, body_text: str, duration: float = DURATION
+) -> list[ProbeScene]:
     """The probes of a body (``body``: its particles' positions, (N, 3); ``volume``: one
     particle's volume; ``body_text``: the body in words, "a cube of side 0.3 m") set up like
-    ``base``. A probe whose body does not fit the domain is left out."""
-    steps = max(1, round(DURATION / base.dt))
+    ``base``, each ``duration`` seconds long. A probe whose body does not fit the domain is
+    left out."""
+    steps = max(1, round(duration / base.dt))
     floor = base.walls.thickness * base.dx
     middle = base.domain_size / 2
     centred = body - body.mean(axis=0) + middle
@@ -66,8 +68,8 @@ def probe_scenes(base: tm.Scene, body: np.ndarray, volume: float, body_text: str
         ("a collapse under its own weight", resting, zero,
          "at rest one cell above the floor, left to fall and settle"),
     ]  # fmt: skip
-    setting = (f"for {DURATION:g} s ({steps} steps of {base.dt:g} s) on the training scene's "
-               "grid, walls and gravity")  # fmt: skip
+    setting = (f"for {steps * base.dt:g} s ({steps} steps of {base.dt:g} s) on the training "
+               "scene's grid, walls and gravity")  # fmt: skip
     probes = []
     for name, positions, velocities, motion in setups:
         try:

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 import taichi_mpm as tm
-from tasks.constitutive.forms import cube_probes
-from tasks.constitutive.probes import IMPACT_SPEED, STRETCH_RATE, probe_scenes, spread
+from tasks.constitutive.forms import cube_probes, probe_duration
+from tasks.constitutive.options import ConstitutiveOptions
+from tasks.constitutive.probes import DURATION, IMPACT_SPEED, STRETCH_RATE, probe_scenes, spread
+from tasks.constitutive.specs import SPECS
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -40,6 +42,16 @@ def test_the_cube_probes_load_the_body_four_ways_on_the_paper_scene_s_set_up():
                                rcond=None)[0][:3]  # fmt: skip
     assert np.allclose(np.diag(gradient), [STRETCH_RATE, -STRETCH_RATE / 2, -STRETCH_RATE / 2])
     assert np.allclose(probes["a collapse under its own weight"].scene.velocities, 0.0)
+
+
+def test_a_run_shortened_by_its_steps_option_shortens_the_probes_in_proportion():
+    spec = SPECS["elastic"]
+    assert probe_duration(spec, ConstitutiveOptions()) == DURATION
+    assert probe_duration(spec, ConstitutiveOptions(steps=spec.steps // 5)) == pytest.approx(
+        DURATION / 5)
+    assert probe_duration(spec, ConstitutiveOptions(steps=2 * spec.steps)) == DURATION
+    short = cube_probes(tm.paper_scene(steps=1), DURATION / 5)
+    assert all(p.scene.steps == 60 and "for 0.03 s (60 steps" in p.probe.text for p in short)
 
 
 def test_a_body_too_tall_to_rest_on_the_floor_keeps_only_the_probes_in_mid_air():
