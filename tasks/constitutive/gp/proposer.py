@@ -23,7 +23,10 @@ fit from new starting values), none when exploring, and most explore children fi
 most probable small forms not yet tried (:mod:`.enumeration`). Outside the opening, the first
 explore child of a batch combines the terms of two or three of the best distinct parents (a
 weighted mixture of plastic returns, a sum of elastic terms), the first combination not yet
-tried, each term from its fitted value at its share of the whole.
+tried, each term from its fitted value at its share of the whole. After the continuation, the
+next exploit child is the first neighbour not yet tried of the best distinct parents
+(:mod:`.neighbourhood`: a shifted apex, a threshold that grows with compression, a swapped
+operation, an added term), from the parent's fitted values.
 
 In elastic search, new structure must be physically admissible (:mod:`.admissible`: frame
 indifferent, no stress at rest), and most explore children first try the next untried pair of
@@ -62,6 +65,7 @@ from tasks.constitutive.gp.genome import (
     to_json,
     with_param,
 )
+from tasks.constitutive.gp.neighbourhood import neighbours
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS, restart
 
@@ -188,6 +192,13 @@ class GeneticProgrammingProposer:
             if continued is not None:
                 child, note = continued
                 seen.add(to_json(child))
+                answers.append(_answer(law_code(child), note))
+        if n > len(answers) and exploration(temperature) == 0:
+            near = _neighbour(pool, forms)
+            if near is not None:
+                child, note = near
+                seen.add(to_json(child))
+                forms.add(form(child))
                 answers.append(_answer(law_code(child), note))
         if n > len(answers) and exploration(temperature) == 1 and not opening:
             combined = _combination(pool, self.searched, forms)
@@ -320,16 +331,35 @@ def _continuation(
     return fitted, note
 
 
+def _neighbour(pool: list[_Member], forms: set[Key]) -> tuple[Genome, str] | None:
+    """The first neighbour (:func:`.neighbourhood.neighbours`) of the best distinct parents,
+    the best first (at most :data:`COMBINED_FROM`), whose form is not in ``forms``; None when
+    every one is tried."""
+    for member in _best_distinct(pool)[:COMBINED_FROM]:
+        for rank, (child, change) in enumerate(neighbours(member.genome), start=1):
+            if form(child) not in forms:
+                note = f"tried neighbour {rank} of the form of loss {member.loss:.4g}: {change}"
+                return child, note
+    return None
+
+
+def _best_distinct(pool: list[_Member]) -> list[_Member]:
+    """The parents of finite loss with terms, the best first, one per form."""
+    best: list[_Member] = []
+    known: set[Key] = set()
+    for member in sorted(pool, key=lambda member: member.loss):
+        key = form(member.genome)
+        if math.isfinite(member.loss) and member.genome.terms and key not in known:
+            best.append(member)
+            known.add(key)
+    return best
+
+
 def _combination(pool: list[_Member], searched: str, forms: set[Key]) -> tuple[Genome, str] | None:
     """The first combination (:data:`COMBINED_SIZES` parents at a time, the best first) of the
     best :data:`COMBINED_FROM` distinct parents' terms whose form is not in ``forms`` and that
     keeps the limits (and, elastic, is admissible); None when every one is tried."""
-    best: list[_Member] = []
-    for member in sorted(pool, key=lambda member: member.loss):
-        known = {form(chosen.genome) for chosen in best}
-        if math.isfinite(member.loss) and member.genome.terms and form(member.genome) not in known:
-            best.append(member)
-    best = best[:COMBINED_FROM]
+    best = _best_distinct(pool)[:COMBINED_FROM]
     for size in COMBINED_SIZES:
         for chosen in itertools.combinations(best, size):
             terms = [_shared(term, size) for member in chosen for term in member.genome.terms]
