@@ -82,6 +82,13 @@ ROWS: dict[str, Row] = {
         {"searched": "plastic", "elastic": "stvk", "E": "5e4", "nu": "0.3"},
         ("--material", "sand", "--param", "E=5e4", "--param", "nu=0.3",
          "--param", "friction_angle=35"), (5e4, 0.3)),
+    # a variant of a textbook law: the sand with a small cohesion (its cone's apex shifted)
+    "observed-cohesive": Row(
+        "observed", "drucker_prager_cohesion.py",
+        {"log_friction_angle": _ln(70.0), "cohesion": 0.04},
+        {"searched": "plastic", "elastic": "stvk", "E": "5e4", "nu": "0.3"},
+        ("--material", "sand", "--param", "E=5e4", "--param", "nu=0.3",
+         "--param", "friction_angle=35", "--param", "cohesion=0.02"), (5e4, 0.3)),
     "observed-vonmises": Row(
         "observed", "von_mises.py", {"log_yield_stress": _ln(3000.0)},
         {"searched": "plastic", "elastic": "stvk", "E": "8e4", "nu": "0.25"},

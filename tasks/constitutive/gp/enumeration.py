@@ -55,6 +55,8 @@ def expressions(kind: str, value_type: str, nodes: int) -> tuple[tuple[Expr, flo
     found: list[tuple[Expr, float]] = []
     for op in ops:
         chance = grammar.weight(kind, value_type, op.name) / total
+        if chance == 0:
+            continue
         if op.terminal:
             if nodes == 1:
                 found.append((Node(op.name), chance))

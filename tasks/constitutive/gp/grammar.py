@@ -26,7 +26,9 @@ Two operations are textbook return mappings of a principal strain, written once 
 functions of the generated module: ``cylinder`` (von Mises: the deviatoric part shortened to a
 radius) and ``cone`` (Drucker-Prager: a radius proportional to the compression, and no strain
 left under expansion). They are blocks the search may combine, never the answer it is given:
-their radius or slope is a subtree to find and fit like any other.
+their radius or slope is a subtree to find and fit like any other. ``offset`` adds a scalar to
+every principal component (a move along the hydrostatic axis); random generation never draws
+it, the neighbourhood of a fitted form uses it to shift a return's apex.
 
 Templates use ``{0}``, ``{1}``, ... for the children's values; the generated code gives every
 operation its own variable, so children are always atomic expressions.
@@ -145,6 +147,7 @@ _OPS = [
        helpers=("cylinder_return",)),
     Op("cone", PRINCIPAL, (PRINCIPAL, SCALAR), "cone_return({0}, {1})",
        helpers=("cylinder_return", "cone_return")),
+    Op("offset", PRINCIPAL, (PRINCIPAL, SCALAR), "{0} + {1}"),
     Op("J", SCALAR, (), "J", ("J",)),
     Op("log_J", SCALAR, (), "log_J", ("log_J",)),
     Op("const", SCALAR, (PARAM,), "{0}.expand(F.shape[0], 1)"),
@@ -160,6 +163,11 @@ OPS: dict[str, dict[str, Op]] = {
     t: {op.name: op for op in _OPS if op.out == t} for t in VALUE_TYPES
 }
 
+#: Operations random generation never draws: only the neighbourhood of a fitted form
+#: (:mod:`.neighbourhood`) writes them, as ``offset`` moves a return's apex along the
+#: hydrostatic axis.
+_NEIGHBOURHOOD_ONLY = {(PRINCIPAL, "offset"): 0.0}
+
 #: How often random generation picks an operation (default 1), per kind of law searched:
 #: stresses of b, J and principal strains for elastic laws, strain corrections rebuilt into F
 #: for plastic ones.
@@ -167,13 +175,13 @@ OP_WEIGHTS: dict[str, dict[tuple[str, str], float]] = {
     "elastic": {(MATRIX, "b"): 2.0, (MATRIX, "spatial"): 2.0, (MATRIX, "frame"): 0.5,
                 (MATRIX, "from_strain"): 0.3, (MATRIX, "blend"): 0.5, (PRINCIPAL, "eps"): 2.0,
                 (PRINCIPAL, "exp"): 0.5, (PRINCIPAL, "shrink"): 0.5, (PRINCIPAL, "cylinder"): 0.3,
-                (PRINCIPAL, "cone"): 0.3, (SCALAR, "log_J"): 1.5},
+                (PRINCIPAL, "cone"): 0.3, (SCALAR, "log_J"): 1.5, **_NEIGHBOURHOOD_ONLY},
     "plastic": {(MATRIX, "from_strain"): 8.0, (MATRIX, "frame"): 0.5, (MATRIX, "spatial"): 0.5,
                 (MATRIX, "matmul"): 0.5, (MATRIX, "b"): 0.3, (MATRIX, "T"): 0.3,
                 (MATRIX, "dev"): 0.3, (MATRIX, "vol"): 0.3, (PRINCIPAL, "eps"): 3.0,
                 (PRINCIPAL, "sigma"): 0.5, (PRINCIPAL, "shrink"): 1.5, (PRINCIPAL, "dev"): 1.5,
                 (PRINCIPAL, "vol"): 1.5, (PRINCIPAL, "cylinder"): 2.0, (PRINCIPAL, "cone"): 2.0,
-                (SCALAR, "const"): 3.0},
+                (SCALAR, "const"): 3.0, **_NEIGHBOURHOOD_ONLY},
 }  # fmt: skip
 
 
@@ -228,7 +236,12 @@ def weight(kind: str, value_type: str, name: str) -> float:
     return OP_WEIGHTS[kind].get((value_type, name), 1.0)
 
 
-def alternatives(value_type: str, name: str) -> list[str]:
-    """Other operations of ``value_type`` with the same argument types as ``name``."""
+def alternatives(value_type: str, name: str, kind: str) -> list[str]:
+    """Other operations of ``value_type`` with the same argument types as ``name`` that random
+    generation of ``kind`` laws draws."""
     args = OPS[value_type][name].args
-    return [op.name for op in OPS[value_type].values() if op.args == args and op.name != name]
+    return [
+        op.name
+        for op in OPS[value_type].values()
+        if op.args == args and op.name != name and weight(kind, value_type, op.name) > 0
+    ]

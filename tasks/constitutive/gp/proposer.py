@@ -20,7 +20,13 @@ weights are interpolated. Perturbations grow with temperature too. A child made 
 structure must have a form (:mod:`.canonical`) new to the run (its parents, its batch and the
 earlier answers); in plastic search few children only move constants (some restart a form's
 fit from new starting values), none when exploring, and most explore children first try the
-most probable small forms not yet tried (:mod:`.enumeration`).
+most probable small forms not yet tried (:mod:`.enumeration`). Outside the opening, the first
+explore child of a batch combines the terms of two or three of the best distinct parents (a
+weighted mixture of plastic returns, a sum of elastic terms), the first combination not yet
+tried, each term from its fitted value at its share of the whole. After the continuation, the
+next exploit child is the first neighbour not yet tried of the best distinct parents
+(:mod:`.neighbourhood`: a shifted apex, a threshold that grows with compression, a swapped
+operation, an added term), from the parent's fitted values.
 
 In elastic search, new structure must be physically admissible (:mod:`.admissible`: frame
 indifferent, no stress at rest), and most explore children first try the next untried pair of
@@ -34,6 +40,7 @@ in one fit, or blow up the simulation when too stiff.
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 from collections.abc import Sequence
@@ -48,14 +55,17 @@ from tasks.constitutive.gp.elastic_forms import RESPONSES
 from tasks.constitutive.gp.enumeration import elastic_pairs, loose_form, small_forms
 from tasks.constitutive.gp.genome import (
     Genome,
+    Node,
     Param,
     Term,
+    fits,
     params,
     random_coefficient,
     random_genome,
     to_json,
     with_param,
 )
+from tasks.constitutive.gp.neighbourhood import neighbours
 from tasks.constitutive.gp.seeds import seed_genome
 from tasks.constitutive.gp.variation import OPERATORS, restart
 
@@ -82,6 +92,11 @@ PAIR_SPREAD = 0.1  # standard deviation of a pair's log-moduli around their matc
 TOURNAMENT = {LOW: 4, HIGH: 2}  # tournament sizes at either end
 MIN_STEP_TEMPERATURE = 0.1  # perturbations never vanish, even at temperature 0
 ATTEMPTS = 30  # tries for a child new to the parents and the batch
+#: Several-term laws: the first explore child of a batch (outside the opening) combines the
+#: terms of two, then three, of the best :data:`COMBINED_FROM` distinct parents, the first such
+#: combination not yet tried, each term started at its fitted value times its share (1/k of k:
+#: a weighted mixture of plastic returns, the average of elastic stresses).
+COMBINED_FROM, COMBINED_SIZES = 4, (2, 3)
 #: A fit that moved a constant (its raw value: a log, a logit) this much had not settled: the
 #: first exploit child fits that law again from where it stopped (:func:`_continuation`).
 MOVED = 0.01
@@ -177,6 +192,20 @@ class GeneticProgrammingProposer:
             if continued is not None:
                 child, note = continued
                 seen.add(to_json(child))
+                answers.append(_answer(law_code(child), note))
+        if n > len(answers) and exploration(temperature) == 0:
+            near = _neighbour(pool, forms)
+            if near is not None:
+                child, note = near
+                seen.add(to_json(child))
+                forms.add(form(child))
+                answers.append(_answer(law_code(child), note))
+        if n > len(answers) and exploration(temperature) == 1 and not opening:
+            combined = _combination(pool, self.searched, forms)
+            if combined is not None:
+                child, note = combined
+                seen.add(to_json(child))
+                forms.add(form(child))
                 answers.append(_answer(law_code(child), note))
         second: list[tuple[Genome, str]] = []  # an opening form's start from higher constants
         for _ in range(n - len(answers)):
@@ -300,6 +329,78 @@ def _continuation(
         return None
     note = f"continued the fit of the best parent (loss {best.loss:.4g}), which moved its constants"
     return fitted, note
+
+
+def _neighbour(pool: list[_Member], forms: set[Key]) -> tuple[Genome, str] | None:
+    """The first neighbour (:func:`.neighbourhood.neighbours`) of the best distinct parents,
+    the best first (at most :data:`COMBINED_FROM`), whose form is not in ``forms``; None when
+    every one is tried."""
+    for member in _best_distinct(pool)[:COMBINED_FROM]:
+        for rank, (child, change) in enumerate(neighbours(member.genome), start=1):
+            if form(child) not in forms:
+                note = f"tried neighbour {rank} of the form of loss {member.loss:.4g}: {change}"
+                return child, note
+    return None
+
+
+def _best_distinct(pool: list[_Member]) -> list[_Member]:
+    """The parents of finite loss with terms, the best first, one per form."""
+    best: list[_Member] = []
+    known: set[Key] = set()
+    for member in sorted(pool, key=lambda member: member.loss):
+        key = form(member.genome)
+        if math.isfinite(member.loss) and member.genome.terms and key not in known:
+            best.append(member)
+            known.add(key)
+    return best
+
+
+def _combination(pool: list[_Member], searched: str, forms: set[Key]) -> tuple[Genome, str] | None:
+    """The first combination (:data:`COMBINED_SIZES` parents at a time, the best first) of the
+    best :data:`COMBINED_FROM` distinct parents' terms whose form is not in ``forms`` and that
+    keeps the limits (and, elastic, is admissible); None when every one is tried."""
+    best = _best_distinct(pool)[:COMBINED_FROM]
+    for size in COMBINED_SIZES:
+        for chosen in itertools.combinations(best, size):
+            terms = [_shared(term, size) for member in chosen for term in member.genome.terms]
+            child = Genome(searched, _merged(terms))
+            if not fits(child) or form(child) in forms:
+                continue
+            if searched == "elastic" and not admissible(child):
+                continue
+            losses = ", ".join(f"{member.loss:.4g}" for member in chosen)
+            return child, f"combined the terms of the best forms of losses {losses}"
+    return None
+
+
+def _merged(terms: list[Term]) -> tuple[Term, ...]:
+    """``terms`` with those of one expression as one, its coefficient the sum of theirs (of
+    the moduli, or of the weights)."""
+    merged: dict[Node, Term] = {}
+    for term in terms:
+        same = merged.get(term.expr)
+        if same is None:
+            merged[term.expr] = term
+            continue
+        a, b = same.coefficient, term.coefficient
+        if a.transform == "unit":
+            raw = a.raw + b.raw
+        else:
+            raw = max(a.raw, b.raw) + math.log1p(math.exp(-abs(a.raw - b.raw)))
+        merged[term.expr] = replace(same, coefficient=replace(a, raw=round(raw, 4)))
+    return tuple(merged.values())
+
+
+def _shared(term: Term, parts: int) -> Term:
+    """``term`` at its share of a combination of ``parts`` laws: its weight over ``parts`` (a
+    plastic correction), its modulus over ``parts`` (an elastic term: its log, as an older
+    run's logit of a weight, shifted by log(parts))."""
+    coefficient = term.coefficient
+    if coefficient.transform == "unit":
+        raw = min(coefficient.raw, 1.0) / parts
+    else:
+        raw = coefficient.raw - math.log(parts)
+    return replace(term, coefficient=replace(coefficient, raw=round(raw, 4)))
 
 
 def _reference(pool: list[_Member]) -> tuple[tuple[float, float] | None, float]:

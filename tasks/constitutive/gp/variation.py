@@ -73,7 +73,7 @@ def swap_op(rng: random.Random, genome: Genome, other: Genome, temperature: floa
         for i, term in enumerate(genome.terms)
         for site in sites(term.expr)
         if isinstance(site.expr, Node)
-        and (names := grammar.alternatives(site.value_type, site.expr.op))
+        and (names := grammar.alternatives(site.value_type, site.expr.op, genome.kind))
     ]
     if not choices:
         return None

@@ -21,7 +21,7 @@ from tasks.constitutive import prompt_text
 from tasks.constitutive.gp import GeneticProgrammingProposer, grammar
 from tasks.constitutive.gp.canonical import form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
-from tasks.constitutive.gp.enumeration import loose_form, small_forms
+from tasks.constitutive.gp.enumeration import elastic_pairs, loose_form, small_forms
 from tasks.constitutive.gp.genome import (
     Genome,
     Node,
@@ -616,3 +616,37 @@ def test_an_unsettled_fit_of_the_best_parent_is_continued_once_by_the_first_expl
     assert not any("continued" in a for a in again)
     settled = Parent(started, 1e-6, {"weight0": 1.0, "log_k1": -3.895})
     assert not any("continued" in a for a in proposer.propose_from([settled], 0.5, 2, 0))
+
+
+def test_the_first_explore_child_combines_the_best_forms_pairs_then_triples():
+    """Outside the opening, an explore batch starts with the first untried combination of the
+    best distinct parents' terms, each at its fitted value times its share (a plastic weight
+    over k, an elastic modulus over k); tried combinations come round no more."""
+    forms = [with_values(small_forms("plastic")[i], {"weight0": 0.8}) for i in (0, 3, 7)]
+    found = [Parent(law_code(g), loss) for g, loss in zip(forms, (1e-6, 2e-6, 3e-6), strict=True)]
+    pool = [*found, Parent(prompt_text.PLASTIC_SEED, 1e-4)]
+    proposer = GeneticProgrammingProposer("plastic")
+    tried: list[str] = []
+    combined = []
+    for seed in range(5):
+        answers = proposer.propose_from(pool, 1.0, 2, seed=seed, tried=tried)
+        tried += answers
+        if "combined the terms of the best forms" in answers[0]:
+            combined.append(genome_from_code(parse_response(answers[0]).code, "plastic"))
+    expected = [(0, 1), (0, 2), (1, 2), (0, 1, 2)]
+    assert [[t.expr for t in g.terms] for g in combined] == [
+        [forms[i].terms[0].expr for i in chosen] for chosen in expected]
+    for genome, chosen in zip(combined, expected, strict=True):
+        assert all(t.coefficient.raw == pytest.approx(0.8 / len(chosen), abs=1e-4)
+                   for t in genome.terms)  # fmt: skip
+    assert not any("combined" in a for a in proposer.propose_from(pool, 0.5, 4, seed=0))
+    assert not any("combined" in a for a in proposer.propose_from(pool, 1.0, 4, 0, opening=True))
+    pair = elastic_pairs()[0]
+    elastic = [Parent(law_code(with_values(pair, {"log_modulus0": 12.0, "log_modulus1": 11.0})),
+                      1e-6), Parent(law_code(with_values(elastic_pairs()[3], {})), 2e-6)]
+    answer = GeneticProgrammingProposer("elastic").propose_from(elastic, 1.0, 1, seed=0)[0]
+    summed = genome_from_code(parse_response(answer).code, "elastic")
+    assert "combined the terms" in answer and len(summed.terms) == 3  # one term in common
+    moduli = {term.expr: math.exp(term.coefficient.raw) for term in summed.terms}
+    halves = [(pair.terms[0].expr, math.exp(12.0) / 2)]
+    assert all(moduli[expr] == pytest.approx(value, rel=1e-3) for expr, value in halves)
