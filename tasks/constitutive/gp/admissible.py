@@ -125,8 +125,8 @@ _REST_RULES = {
     "from_strain": lambda p: math.exp(min(max(p, -5.0), 5.0)),
     "exp": lambda a: math.exp(min(a, 5.0)), "pos": lambda a: max(a, 0.0),
     "neg": lambda a: min(a, 0.0), "cylinder": lambda p, s: p,
-    "cone": lambda p, s: 0.0 if p >= 0 else p, "offset": lambda p, s: p + s,
-    "sum": lambda p: 3 * p,
+    "cone": lambda p, s: 0.0 if p >= 0 else p,
+    "shifted_cone": lambda p, s, a: a / 3 if 3 * p >= a else p, "sum": lambda p: 3 * p,
     "norm": lambda p: math.sqrt(3 * p * p + 1e-12), "trace": lambda a: 3 * a,
 }  # fmt: skip
 REST_TOLERANCE = 1e-5  # |c| below this is no stress (a norm's epsilon gives 1e-6)

@@ -26,9 +26,9 @@ Two operations are textbook return mappings of a principal strain, written once 
 functions of the generated module: ``cylinder`` (von Mises: the deviatoric part shortened to a
 radius) and ``cone`` (Drucker-Prager: a radius proportional to the compression, and no strain
 left under expansion). They are blocks the search may combine, never the answer it is given:
-their radius or slope is a subtree to find and fit like any other. ``offset`` adds a scalar to
-every principal component (a move along the hydrostatic axis); random generation never draws
-it, the neighbourhood of a fitted form uses it to shift a return's apex.
+their radius or slope is a subtree to find and fit like any other. ``shifted_cone`` is the cone
+with its apex moved to a volumetric strain given by a third argument (cohesion); random
+generation never draws it, the neighbourhood of a fitted cone writes it.
 
 Templates use ``{0}``, ``{1}``, ... for the children's values; the generated code gives every
 operation its own variable, so children are always atomic expressions.
@@ -95,6 +95,16 @@ def cone_return(strain: torch.Tensor, slope: torch.Tensor) -> torch.Tensor:
     inside = cylinder_return(strain, -slope * trace)  # (B, 3)
     return torch.where(trace >= 0, torch.zeros_like(strain), inside)  # (B, 3)
 ''',
+    "shifted_cone_return": '''
+def shifted_cone_return(
+    strain: torch.Tensor, slope: torch.Tensor, apex: torch.Tensor
+) -> torch.Tensor:
+    """Principal strain (B, 3) returned onto the cone of ``slope`` (B, 1) whose apex sits at
+    the volumetric strain ``apex`` (B, 1) instead of 0 (Drucker-Prager with cohesion): the
+    cone's return about the point apex / 3 of the hydrostatic axis."""
+    shift = apex / 3  # (B, 1)
+    return cone_return(strain - shift, slope) + shift  # (B, 3)
+''',
 }
 
 _NORM = "torch.sqrt(({0} ** 2).sum(-1, keepdim=True) + 1e-12)"
@@ -147,7 +157,9 @@ _OPS = [
        helpers=("cylinder_return",)),
     Op("cone", PRINCIPAL, (PRINCIPAL, SCALAR), "cone_return({0}, {1})",
        helpers=("cylinder_return", "cone_return")),
-    Op("offset", PRINCIPAL, (PRINCIPAL, SCALAR), "{0} + {1}"),
+    Op("shifted_cone", PRINCIPAL, (PRINCIPAL, SCALAR, SCALAR),
+       "shifted_cone_return({0}, {1}, {2})",
+       helpers=("cylinder_return", "cone_return", "shifted_cone_return")),
     Op("J", SCALAR, (), "J", ("J",)),
     Op("log_J", SCALAR, (), "log_J", ("log_J",)),
     Op("const", SCALAR, (PARAM,), "{0}.expand(F.shape[0], 1)"),
@@ -164,9 +176,9 @@ OPS: dict[str, dict[str, Op]] = {
 }
 
 #: Operations random generation never draws: only the neighbourhood of a fitted form
-#: (:mod:`.neighbourhood`) writes them, as ``offset`` moves a return's apex along the
+#: (:mod:`.neighbourhood`) writes them, as ``shifted_cone`` moves a cone's apex along the
 #: hydrostatic axis.
-_NEIGHBOURHOOD_ONLY = {(PRINCIPAL, "offset"): 0.0}
+_NEIGHBOURHOOD_ONLY = {(PRINCIPAL, "shifted_cone"): 0.0}
 
 #: How often random generation picks an operation (default 1), per kind of law searched:
 #: stresses of b, J and principal strains for elastic laws, strain corrections rebuilt into F

@@ -16,7 +16,7 @@ from tasks.constitutive.gp import GeneticProgrammingProposer, grammar
 from tasks.constitutive.gp.canonical import form
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_values
 from tasks.constitutive.gp.genome import from_json, random_genome, sites
-from tasks.constitutive.gp.neighbourhood import neighbours
+from tasks.constitutive.gp.neighbourhood import APEX_SCALE, neighbours
 from tasks.constitutive.law_code import load_law
 from tests.tasks.constitutive.test_gp import assert_runs, deformations
 
@@ -43,9 +43,9 @@ def strained(batch: int = 64) -> torch.Tensor:
 
 
 def test_the_cone_with_a_shifted_apex_is_drucker_prager_with_cohesion():
-    """The first neighbour of the Drucker-Prager form, at a = -c/3, b = c/3 and the cone's
-    slope at the textbook one, is ``drucker_prager_cohesion.py`` to float precision; at a = b
-    = 0 it is the parent."""
+    """The first neighbour of the Drucker-Prager form, its apex at the cohesion c and the cone's
+    slope at the textbook one, is ``drucker_prager_cohesion.py`` to float precision; with its
+    apex at 0, where it starts, it is the parent."""
     genome = from_json(CONE)
     shifted, change = next(neighbours(genome))
     assert change == "shifted the apex of its cone"
@@ -58,7 +58,9 @@ def test_the_cone_with_a_shifted_apex_is_drucker_prager_with_cohesion():
     mu, lam = E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
     sin_phi = math.sin(math.radians(angle))
     slope = (3 * lam + 2 * mu) / (2 * mu) * math.sqrt(2 / 3) * 2 * sin_phi / (3 - sin_phi)
-    ours = outputs(code, F, k1=-cohesion / 3, log_k2=math.log(slope), k3=cohesion / 3)
+    scale = 2 * math.exp(APEX_SCALE)  # the apex is scale * tanh(u)
+    ours = outputs(code, F, log_k1=math.log(slope), log_k2=math.log(scale),
+                   atanh_k3=math.atanh(cohesion / scale))  # fmt: skip
     truth = outputs((LAWS / "drucker_prager_cohesion.py").read_text(), F,
                     log_friction_angle=math.log(angle), cohesion=cohesion)  # fmt: skip
     assert not torch.allclose(truth, parent, atol=1e-4)  # the cohesion matters here
@@ -84,14 +86,14 @@ def test_neighbours_are_new_valid_forms_that_start_near_their_parent(text):
 
 
 def test_random_generation_never_writes_a_shifted_apex():
-    """``offset`` belongs to the neighbourhood: random laws and swaps never draw it."""
+    """``shifted_cone`` belongs to the neighbourhood: random laws and swaps never draw it."""
     rng = random.Random(0)
     for kind in ("elastic", "plastic"):
         for _ in range(200):
             genome = random_genome(rng, kind)
             ops = {s.expr.op for t in genome.terms for s in sites(t.expr) if hasattr(s.expr, "op")}
-            assert "offset" not in ops
-        assert "offset" not in grammar.alternatives("P", "cone", kind)
+            assert "shifted_cone" not in ops
+        assert "shifted_cone" not in grammar.alternatives("P", "cone", kind)
 
 
 def test_the_exploit_batch_tries_the_neighbours_of_the_best_form_in_order():
@@ -113,5 +115,5 @@ def test_the_exploit_batch_tries_the_neighbours_of_the_best_form_in_order():
     assert ranks == [1, 2, 3]
     assert "tried neighbour 1" in tried[0]  # the best parent's fit had settled: no continuation
     first = genome_from_code(parse_response(tried[0]).code, "plastic")
-    assert first == with_values(next(neighbours(genome))[0], {"weight0": 1.0, "log_k2": -0.6})
+    assert first == with_values(next(neighbours(genome))[0], {"weight0": 1.0, "log_k1": -0.6})
     assert not any("neighbour" in a for a in proposer.propose_from(pool, 1.0, 4, seed=0))
