@@ -53,9 +53,10 @@ from tasks.constitutive.gp.grammar import PRINCIPAL
 
 #: A shifted apex is written ``s tanh(u)``, u starting at 0 and the scale s at e^APEX_SCALE =
 #: 0.05, a volumetric strain's size: a fit's first step (L-BFGS moves its raw values by about
-#: 1 in all) would move a bare constant far past every strain of the scene. (e^-4 reached
-#: 1.1e-4, e^-3 4.0e-5 in a 5-epoch fit of observed-cohesive's cone from the plain cone's
-#: fitted 6.6e-4; the floor is 5.05e-6.)
+#: 1 in all) would move a bare constant far past every strain of the scene. (One 5-epoch fit
+#: of observed-cohesive's shifted cone from the plain cone's fitted 6.6e-4 reaches 4.0e-5,
+#: ``python benchmarks/apex_fit.py``; the same fit at e^-4 reached 1.1e-4; the floor is
+#: 5.05e-6.)
 APEX_SCALE = -3.0
 #: Returns with a radius or slope (their second argument) that may grow with compression.
 RETURNS = ("cone", "cylinder", "shrink")
