@@ -86,8 +86,9 @@ def neighbours(genome: Genome) -> Iterator[tuple[Genome, str]]:
 def _plastic(genome: Genome) -> Iterator[tuple[Genome, str]]:
     yield from _shifted_apices(genome)
     yield from _pressure_thresholds(genome)
+    present = {t.expr for t in genome.terms}
     for term in added_corrections():
-        if term.expr not in {t.expr for t in genome.terms}:
+        if term.expr not in present:
             block = term.expr.children[0]
             assert isinstance(block, Node)
             change = f"added a small correction ({block.op} of the strain)"
@@ -110,16 +111,23 @@ def added_corrections() -> tuple[Term, ...]:
     )
 
 
+@functools.cache
+def _listed_elastic() -> tuple[Node, ...]:
+    """The expressions of the listed admissible elastic forms (:mod:`.elastic_forms`)."""
+    return tuple(from_json(text).terms[0].expr for text, _, _ in FORMS)
+
+
 def _elastic(genome: Genome) -> Iterator[tuple[Genome, str]]:
-    listed = [from_json(text).terms[0].expr for text, _, _ in FORMS]
+    listed = _listed_elastic()
     for index, term in enumerate(genome.terms):
         for expr in listed:
             if expr != term.expr:
                 yield with_term(genome, index, replace(term, expr=expr)), "replaced one term"
     largest = max(term.coefficient.raw for term in genome.terms)
     modulus = Param("log", round(largest + math.log(ADDED_MODULUS), 4))
+    present = {t.expr for t in genome.terms}
     for expr in listed:
-        if expr not in {t.expr for t in genome.terms}:
+        if expr not in present:
             yield replace(genome, terms=(*genome.terms, Term(modulus, expr))), "added a term"
     yield from _swaps(genome)
 

@@ -43,7 +43,7 @@ from __future__ import annotations
 import itertools
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 from sga_agent.task import Parent
@@ -187,23 +187,17 @@ class GeneticProgrammingProposer:
         listed = {loose_form(genome) for genome in known if len(genome.terms) <= enumerated}
         reference = _reference(pool) if self.searched == "elastic" else (None, math.nan)
         answers = []
-        if n and exploration(temperature) == 0:
-            continued = _continuation(parents, self.searched, {to_json(g) for g in earlier})
-            if continued is not None:
-                child, note = continued
-                seen.add(to_json(child))
-                answers.append(_answer(law_code(child), note))
-        if n > len(answers) and exploration(temperature) == 0:
-            near = _neighbour(pool, forms)
-            if near is not None:
-                child, note = near
-                seen.add(to_json(child))
-                forms.add(form(child))
-                answers.append(_answer(law_code(child), note))
-        if n > len(answers) and exploration(temperature) == 1 and not opening:
-            combined = _combination(pool, self.searched, forms)
-            if combined is not None:
-                child, note = combined
+        x = exploration(temperature)
+        firsts: list[Callable[[], tuple[Genome, str] | None]] = []
+        if x == 0:  # the best fit continued, then the best forms' next neighbour
+            answered = {to_json(g) for g in earlier}
+            firsts = [lambda: _continuation(parents, self.searched, answered),
+                      lambda: _neighbour(pool, forms)]  # fmt: skip
+        elif x == 1 and not opening:
+            firsts = [lambda: _combination(pool, self.searched, forms)]
+        for first in firsts:
+            if len(answers) < n and (found := first()) is not None:
+                child, note = found
                 seen.add(to_json(child))
                 forms.add(form(child))
                 answers.append(_answer(law_code(child), note))

@@ -67,6 +67,19 @@ def run_law(code: str) -> tuple[torch.nn.Module, torch.Tensor]:
     return law, out
 
 
+def successive_batches(
+    proposer: GeneticProgrammingProposer, pool: list[Parent], temperature: float, n: int,
+    count: int,
+) -> list[list[str]]:
+    """``count`` batches of ``n`` answers from ``pool`` at ``temperature``, seeds 0, 1, ...,
+    each told the answers of the batches before it (as a search's iterations are)."""
+    batches: list[list[str]] = []
+    for seed in range(count):
+        tried = [answer for batch in batches for answer in batch]
+        batches.append(proposer.propose_from(pool, temperature, n, seed=seed, tried=tried))
+    return batches
+
+
 def assert_runs(code: str, kind: str) -> None:
     law, out = run_law(code)
     assert out.shape == (17, 3, 3) and torch.isfinite(out).all()
@@ -626,13 +639,9 @@ def test_the_first_explore_child_combines_the_best_forms_pairs_then_triples():
     found = [Parent(law_code(g), loss) for g, loss in zip(forms, (1e-6, 2e-6, 3e-6), strict=True)]
     pool = [*found, Parent(prompt_text.PLASTIC_SEED, 1e-4)]
     proposer = GeneticProgrammingProposer("plastic")
-    tried: list[str] = []
-    combined = []
-    for seed in range(5):
-        answers = proposer.propose_from(pool, 1.0, 2, seed=seed, tried=tried)
-        tried += answers
-        if "combined the terms of the best forms" in answers[0]:
-            combined.append(genome_from_code(parse_response(answers[0]).code, "plastic"))
+    combined = [genome_from_code(parse_response(answers[0]).code, "plastic")
+                for answers in successive_batches(proposer, pool, 1.0, 2, 5)
+                if "combined the terms of the best forms" in answers[0]]  # fmt: skip
     expected = [(0, 1), (0, 2), (1, 2), (0, 1, 2)]
     assert [[t.expr for t in g.terms] for g in combined] == [
         [forms[i].terms[0].expr for i in chosen] for chosen in expected]

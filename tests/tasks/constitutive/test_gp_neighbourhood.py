@@ -18,7 +18,12 @@ from tasks.constitutive.gp.codegen import genome_from_code, law_code, with_value
 from tasks.constitutive.gp.genome import from_json, random_genome, sites
 from tasks.constitutive.gp.neighbourhood import APEX_SCALE, neighbours
 from tasks.constitutive.law_code import load_law
-from tests.tasks.constitutive.test_gp import assert_runs, deformations
+from tests.tasks.constitutive.test_gp import (
+    SAND_SLOPE,
+    assert_runs,
+    deformations,
+    successive_batches,
+)
 
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
 CONE = '{"kind":"plastic","terms":[[["unit",1.0],["from_strain",["cone",["eps"],["const",["log",-0.6]]]]]]}'  # noqa: E501
@@ -53,13 +58,9 @@ def test_the_cone_with_a_shifted_apex_is_drucker_prager_with_cohesion():
     F = strained()
     parent = outputs(law_code(genome), F)
     assert torch.allclose(outputs(code, F), parent, atol=1e-12)
-    cohesion, angle = 0.02, 25.0
-    E, nu = 1e6, 0.2
-    mu, lam = E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
-    sin_phi = math.sin(math.radians(angle))
-    slope = (3 * lam + 2 * mu) / (2 * mu) * math.sqrt(2 / 3) * 2 * sin_phi / (3 - sin_phi)
+    cohesion, angle = 0.02, 25.0  # the granular task's sand: E = 1e6 Pa, nu = 0.2
     scale = 2 * math.exp(APEX_SCALE)  # the apex is scale * tanh(u)
-    ours = outputs(code, F, log_k1=math.log(slope), log_k2=math.log(scale),
+    ours = outputs(code, F, log_k1=math.log(SAND_SLOPE), log_k2=math.log(scale),
                    atanh_k3=math.atanh(cohesion / scale))  # fmt: skip
     truth = outputs((LAWS / "drucker_prager_cohesion.py").read_text(), F,
                     log_friction_angle=math.log(angle), cohesion=cohesion)  # fmt: skip
@@ -104,11 +105,10 @@ def test_the_exploit_batch_tries_the_neighbours_of_the_best_form_in_order():
     best = Parent(law_code(genome), 1e-6, {"weight0": 1.0, "log_k1": -0.6})
     pool = [best, Parent(prompt_text.PLASTIC_SEED, 1e-3)]
     proposer = GeneticProgrammingProposer("plastic")
-    tried: list[str] = []
+    batches = successive_batches(proposer, pool, 0.5, 2, 3)
+    tried = [answer for batch in batches for answer in batch]
     ranks = []
-    for seed in range(3):
-        answers = proposer.propose_from(pool, 0.5, 2, seed=seed, tried=tried)
-        tried += answers
+    for answers in batches:
         near = [a for a in answers if "tried neighbour" in a]
         assert len(near) == 1
         ranks.append(int(re.search(r"tried neighbour (\d+) of the form of loss 1e-06", near[0])[1]))
