@@ -12,6 +12,7 @@ truth", the loss a search that found the right form could reach. Usage::
     python benchmarks/discovery.py run --row granular --budget none --label default
                                             # the task's default command, no option
     python benchmarks/discovery.py table    # the markdown table of the results file
+    python benchmarks/discovery.py table --since c3fbb0d   # the rows of c3fbb0d and after
     python benchmarks/discovery.py headroom --row observed-sand --scene thrown --steps 150
 
 ``--tree`` runs the search with another checkout's code on ``PYTHONPATH`` (a worktree of an
@@ -341,8 +342,23 @@ def _percent(value: Any) -> str:
     return "-" if value is None else f"{100 * float(value):.2g} %"
 
 
-def table(path: Path = RESULTS) -> str:
-    """The results file as a markdown table, one line per row run."""
+def descends(commit: str, since: str, repo: Path = ROOT) -> bool:
+    """Whether a row's commit (``-dirty`` stripped) is ``since`` or a descendant of it in
+    ``repo``'s history; False for a commit git does not know there."""
+    done = subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", since,
+                           commit.removesuffix("-dirty")], capture_output=True)  # fmt: skip
+    return done.returncode == 0
+
+
+def table(path: Path = RESULTS, *, since: str | None = None, repo: Path = ROOT) -> str:
+    """The results file as a markdown table, one line per row run; with ``since``, only the
+    rows whose commit is that commit or a descendant of it in ``repo``'s history."""
+    if since is not None:
+        known = subprocess.run(["git", "-C", str(repo), "rev-parse", "--verify", "--quiet",
+                                f"{since}^{{commit}}"], capture_output=True)  # fmt: skip
+        if known.returncode != 0:
+            raise ValueError(f"{since!r} is not a commit of {repo}")
+    kept: dict[str, bool] = {}
     lines = [
         "| row | seed | label | commit | best | seed / best | truth | fitted truth "
         "| best / fitted truth | held-out error (best / fitted truth) | identifiability "
@@ -351,6 +367,11 @@ def table(path: Path = RESULTS) -> str:
     ]
     for text in path.read_text().splitlines() if path.exists() else []:
         r = json.loads(text)
+        if since is not None:
+            if r["commit"] not in kept:
+                kept[r["commit"]] = descends(r["commit"], since, repo)
+            if not kept[r["commit"]]:
+                continue
         ratio = None
         if r["best"] not in (None, "inf") and r["fitted_truth"]:
             ratio = float(r["best"]) / float(r["fitted_truth"])
@@ -385,6 +406,8 @@ def main() -> None:
     probe.add_argument("--scene", choices=("thrown", "paper"), default="paper")
     probe.add_argument("--steps", type=int, default=1000)
     shown = commands.add_parser("table", help="print the results as a markdown table")
+    shown.add_argument("--since", metavar="COMMIT", help="only the rows measured on COMMIT or "
+                       "a descendant of it (a commit git does not know is left out)")  # fmt: skip
     for command in (run, shown):
         command.add_argument("--results", default=str(RESULTS), help="the results file")
     args = parser.parse_args()
@@ -393,7 +416,10 @@ def main() -> None:
     elif args.command == "headroom":
         headroom(args)
     else:
-        print(table(Path(args.results)))
+        try:
+            print(table(Path(args.results), since=args.since))
+        except ValueError as error:
+            parser.error(str(error))
 
 
 if __name__ == "__main__":
