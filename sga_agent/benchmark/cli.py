@@ -104,8 +104,8 @@ def grid_options(default_out: str) -> Callable[[Callable[..., Any]], Callable[..
                      help="Output folder: cells in <task>/<method>/seed-<n>/, then the tables "
                      "and ranks.png. Running again skips finished cells, resumes the others."),
         click.option("--option", "task_options", multiple=True, callback=task_options,
-                     metavar="KEY=VALUE", help="Task option for every cell, repeatable "
-                     "(e.g. steps=100)."),
+                     metavar="KEY=VALUE", help="Task option for every cell whose task has "
+                     "it, repeatable (e.g. steps=100)."),
         click.option("--epochs", type=click.IntRange(min=0),
                      help="Inner-optimization epochs (default: the task's)."),
         click.option("--set", "settings", multiple=True, callback=parse_settings,

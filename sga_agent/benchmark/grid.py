@@ -12,6 +12,7 @@ processes, ``parallel`` at a time, each with its own sandbox workers.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import re
@@ -118,12 +119,13 @@ def plan_cells(
         What is wrong, and the fix.
     """
     _check_axes(tasks, methods, seeds)
+    loaded_tasks = {task: _load(task) for task in tasks}
     cells = []
-    for task in tasks:
-        loaded = _load(task)
+    for task, loaded in loaded_tasks.items():
+        own = _options_of(task, options or {}, loaded_tasks)
         for method in methods:
             try:
-                typed = runner.task_options(loaded, options or {}, method.proposer)
+                typed = runner.task_options(loaded, own, method.proposer)
             except OptionError as error:
                 raise GridError(f"--option: {error}") from error
             if not method.proposer.startswith(runner.REPLAY_PREFIX):
@@ -148,6 +150,18 @@ def plan_cells(
     for cell in cells:
         cell_run(cell)  # a folder holding a run with other settings stops the grid here
     return cells
+
+
+def _options_of(
+    task: str, options: Mapping[str, str], tasks: Mapping[str, TaskBase]
+) -> dict[str, str]:
+    """The shared ``options`` that ``task`` declares: an option goes to the tasks of the grid
+    that have it (``steps`` to the constitutive tasks of a grid with a molecule task). An option
+    no task of the grid has is given to every task, whose check then names it as unknown."""
+    declared = {name: {field.name for field in dataclasses.fields(loaded.options_type)}
+                for name, loaded in tasks.items()}  # fmt: skip
+    unknown = {key for key in options if not any(key in names for names in declared.values())}
+    return {key: value for key, value in options.items() if key in declared[task] | unknown}
 
 
 def _load(task: str) -> TaskBase:

@@ -223,6 +223,19 @@ def test_methods_override_the_shared_settings(tmp_path, registered):
     ]  # fmt: skip
 
 
+def test_an_option_goes_to_the_tasks_that_have_it(tmp_path):
+    """The benchmarks page's grid of elastic and homo with --option steps=100: steps reaches
+    elastic only; an option no task of the grid has is still refused, named."""
+    method = Method("builtin", "builtin", "quick")
+    steps = {"steps": "100"}
+    elastic, homo = plan_cells(["elastic", "homo"], [method], [0], tmp_path, options=steps)
+    assert elastic.config.task_options.steps == 100
+    (homo_alone,) = plan_cells(["homo"], [method], [0], tmp_path)
+    assert homo.config.task_options == homo_alone.config.task_options
+    with pytest.raises(GridError, match="no option 'stepz'"):
+        plan_cells(["elastic", "homo"], [method], [0], tmp_path, options={"stepz": "100"})
+
+
 def test_ranks_tie_and_fewer_valid_seeds_rank_lower():
     grid = {
         "t": {
