@@ -187,11 +187,25 @@ def search(row: Row, options: dict[str, str], seed: int, budget: str, tree: Path
         seconds = time.perf_counter() - started
         if done.returncode != 0:
             sys.exit(f"the search failed:\n{done.stderr[-3000:]}")
+        load_after = os.getloadavg()[0]
         (run,) = [p for p in Path(folder).iterdir() if (p / "summary.json").exists()]
         summary = json.loads((run / "summary.json").read_text())
         config = json.loads((run / "config.json").read_text())
+        if (summary.get("findings") or {}).get("deferred"):  # the budget was spent first
+            summary["findings"] |= reported(run, env)
     return {"summary": summary, "config": config, "seconds": seconds, "load": load,
-            "load_after": os.getloadavg()[0]}  # fmt: skip
+            "load_after": load_after}  # fmt: skip
+
+
+def reported(run: Path, env: dict[str, str]) -> dict[str, Any]:
+    """What ``sga-agent report`` finds of a run whose time budget was spent before the
+    comparison of forms (not part of the search's wall time): its identifiability."""
+    command = [sys.executable, "-m", "sga_agent", "report", str(run), "--json"]
+    done = subprocess.run(command, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"the report failed:\n{done.stderr[-3000:]}")
+    findings = json.loads(done.stdout.strip().splitlines()[-1])["findings"]
+    return {"identifiability": findings.get("identifiability")}
 
 
 def fitted_truth(row: Row, config: dict[str, Any]) -> dict:

@@ -152,19 +152,21 @@ def run(
         store.append(pool_record(pool))
         search = Search(config, task, proposer, pool, store, on_event)
         result = search.run()
-    record_findings(store, task, config.task_options)
+    spent = config.budgets.exceeded(result.totals, ("max_seconds",))
+    record_findings(store, task, config.task_options, compare=not spent)
     return result
 
 
-def record_findings(store: RunStore, task: Task, options: Any) -> None:
+def record_findings(store: RunStore, task: Task, options: Any, compare: bool = True) -> None:
     """Complete the run's ``summary.json`` with what it found (:mod:`sga_agent.report.findings`):
     the best loss against the seed's and the true law's, the best solution with its fitted
     constants, the task's assessment with the run's ``options`` object (its free run, for
-    instance). Read back from the run folder, as the report does; the search core knows
-    nothing of it."""
+    instance), and with ``compare`` (False once a time budget is spent, so that the budget
+    holds) the comparison of the forms that fit equally and the simplified best. Read back
+    from the run folder, as the report does; the search core knows nothing of it."""
     from sga_agent.report.data import read_run
     from sga_agent.report.findings import find
 
     with contextlib.redirect_stdout(sys.stderr):  # stdout may carry --json (Taichi prints)
-        findings = find(read_run(store.path), task, options).to_dict()
+        findings = find(read_run(store.path), task, options, compare=compare).to_dict()
     store.save_summary({**store.summary(), "findings": findings})

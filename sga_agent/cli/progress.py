@@ -444,6 +444,8 @@ def print_result(
         if (forms := findings.get("identifiability")) and forms.get("sentence"):
             # one line however long: it ends with a scene file's path, which must not break
             console.print(f"identifiability: {forms['sentence']}", soft_wrap=True)
+        elif findings.get("deferred"):
+            console.print(f"identifiability: {findings['deferred']}", soft_wrap=True)
         for line in as_task(task).screen_lines(findings):
             console.print(line)
         if natural := natural_values_of(task, best.code, best.parameters):

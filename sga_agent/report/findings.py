@@ -26,11 +26,15 @@ from sga_agent.task import (
     FormComparison,
     Simplified,
     Task,
+    TaskBase,
     as_task,
     solution_with_parameters,
 )
 
 TOP = 3
+#: What a run whose time budget was spent says of the work it left to the report.
+DEFERRED = ("the time budget was spent before the forms were compared and the best simplified; "
+            "`sga-agent report` does both")
 #: The best distinct forms handed to the task's ``compare_forms`` (those within its noise run
 #: on its probe scenes).
 FORMS = 6
@@ -52,6 +56,9 @@ class Findings:
     top_facts: list[dict[str, Any]] = field(default_factory=list)
     duration_s: float | None = None
     changed: list[str] = field(default_factory=list)  # provenance that differs from the start's
+    #: The comparison of forms and the simplification were left out: the run's time budget
+    #: was spent (``sga-agent report`` does them).
+    deferred: bool = False
 
     @property
     def seed_over_best(self) -> float | None:
@@ -92,7 +99,14 @@ class Findings:
             "assessment_error": self.assessment_error or None,
             "molecules": self.top_facts,  # the key summary.json has always had
             "duration_s": self.duration_s,
+            "deferred": DEFERRED if self.deferred else None,
         }
+
+
+def _compares(task: TaskBase) -> bool:
+    """Whether ``task`` compares forms or simplifies a solution (has either hook of its own)."""
+    return any(getattr(getattr(task, hook), "__func__", None) is not getattr(TaskBase, hook)
+               for hook in ("compare_forms", "simplify"))  # fmt: skip
 
 
 def _ratio(numerator: float, denominator: float) -> float | None:
@@ -149,11 +163,15 @@ def distinct(run: Run, task: Task | None, count: int = TOP) -> list[Candidate]:
     return found
 
 
-def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True) -> Findings:
+def find(
+    run: Run, task: Task | None, options: Any = None, simulate: bool = True, compare: bool = True
+) -> Findings:
     """The findings of ``run``; ``task`` (None when it cannot be loaded) adds what it knows,
     given the run's ``options`` (its options object; None: built from the run's config),
-    ``simulate`` allows its free run and the comparison of the forms that fit equally on the
-    task's probe scenes (``compare_forms``). A failing assessment is recorded, not raised."""
+    ``simulate`` allows its free run and, with ``compare``, the comparison of the forms that
+    fit equally on the task's probe scenes (``compare_forms``) and the simplification of the
+    best; without ``compare`` the findings say they were left out (``deferred``). A failing
+    assessment is recorded, not raised."""
     best = run.best
     seed = next((c for c in run.candidates if c.id == SEED), None)
     times = [c.time for c in run.candidates if c.time is not None]
@@ -181,7 +199,8 @@ def find(run: Run, task: Task | None, options: Any = None, simulate: bool = True
             )
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"
-        if simulate and findings.assessment is not None and not findings.changed:
+        findings.deferred = simulate and not compare and _compares(assessed)
+        if simulate and compare and findings.assessment is not None and not findings.changed:
             try:
                 findings.forms = assessed.compare_forms(forms, options, run.path)
             except Exception as error:  # as the assessment's

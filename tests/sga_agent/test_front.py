@@ -40,8 +40,8 @@ class SizedTask(FakeTask):
 def test_a_task_with_sizes_gets_the_front_in_its_report(tmp_path, monkeypatch):
     from sga_agent.task import as_task
 
-    store = run_through_the_runner(tmp_path, monkeypatch, SizedTask(),
-                                   (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
+    store, _ = run_through_the_runner(tmp_path, monkeypatch, SizedTask(),
+                                      (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
     monkeypatch.setattr("sga_agent.report.build.load_or_none", lambda name: as_task(SizedTask()))
     result = CliRunner().invoke(main, ["report", str(store.path), "--no-motion"])
     assert result.exit_code == 0, result.output

@@ -7,6 +7,7 @@ import io
 import json
 import re
 import struct
+import time
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,7 @@ from sga_agent.report.data import Candidate, read_run
 from sga_agent.report.plots import DPI, curves_figure, curves_size, outcomes_figure
 from sga_agent.report.render import Section, Text, markdown, to_html
 from sga_agent.run_store import RunStore
-from sga_agent.search import Search
+from sga_agent.search import Search, SearchResult
 from sga_agent.task import (
     STATUSES,
     Assessment,
@@ -347,18 +348,21 @@ class _Run:
         return {"final_error": self.error, "scene": "held-out scene"}
 
 
-def run_through_the_runner(tmp_path, monkeypatch, task, values) -> RunStore:
+def run_through_the_runner(
+    tmp_path, monkeypatch, task, values, evaluator=None, **settings
+) -> tuple[RunStore, SearchResult]:
     """A search of ``task`` run as the CLI runs it (findings and provenance included), its
-    answers the fake laws of ``values``, scored by the loss written in their code."""
+    answers the fake laws of ``values``, scored by the loss written in their code (by
+    ``evaluator``, default :class:`LossInCode`); ``settings`` override the search's."""
     from sga_agent import runner
 
-    cfg = config()
+    cfg = config(**settings)
     store = RunStore.create(tmp_path, cfg, {"proposer": "scripted"})
-    monkeypatch.setattr(runner, "make_pool", lambda config: contextlib.nullcontext(LossInCode()))
+    pool = contextlib.nullcontext(evaluator or LossInCode())
+    monkeypatch.setattr(runner, "make_pool", lambda config: pool)
     monkeypatch.setattr(runner, "pool_record", lambda pool: {"type": "sandbox"})
     answers = [LAW.format(value=v) for v in values]
-    runner.run(cfg, store, proposer=Scripted(answers), task=task)
-    return store
+    return store, runner.run(cfg, store, proposer=Scripted(answers), task=task)
 
 
 class MeasuredTask(FakeTask):
@@ -385,8 +389,8 @@ def test_a_report_says_what_changed_since_the_run_started(tmp_path, monkeypatch)
     it back to the task (``with_provenance``) and list what differs from the task's now; the
     held-out record and the verdict reach summary.json and the report."""
 
-    store = run_through_the_runner(tmp_path, monkeypatch, MeasuredTask(),
-                                   (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
+    store, _ = run_through_the_runner(tmp_path, monkeypatch, MeasuredTask(),
+                                      (5.0, 3.0, 7.0, 1.0, 2.0, 4.0))  # fmt: skip
     assert store.provenance() == {"observation_sha256": "aaaa"}
     findings = store.summary()["findings"]
     assert findings["held_out"] == {"final_error": 0.25, "scene": "held-out scene"}
@@ -435,8 +439,8 @@ def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_repo
     """The task is handed the run's distinct scored forms, best first; what it finds goes
     into summary.json and the report's summary, in words."""
 
-    store = run_through_the_runner(tmp_path, monkeypatch, ComparingTask(),
-                                   (5.0, 3.0, 7.0, 1.0, 1.5, 4.0))  # fmt: skip
+    store, _ = run_through_the_runner(tmp_path, monkeypatch, ComparingTask(),
+                                      (5.0, 3.0, 7.0, 1.0, 1.5, 4.0))  # fmt: skip
     assert [loss for _, loss in ComparingTask.handed] == [1.0, 1.5, 3.0, 4.0, 5.0, 7.0]
     found = store.summary()["findings"]["identifiability"]
     assert found["determined"] is False and found["losses"] == [1.0, 1.5]
@@ -454,6 +458,45 @@ def test_the_forms_that_fit_equally_and_the_probe_reach_the_summary_and_the_repo
     assert ("Simplified: 1 of its parts costs less than the noise and is dropped (its second "
             "term): the loss goes from 1 to 1.2, 2 at most.\n\n```python\n# 02-exploit-00, "
             "simpler\n```") in md  # fmt: skip
+
+
+class SlowLossInCode(LossInCode):
+    """:class:`LossInCode` taking 0.2 s an evaluation."""
+
+    def submit(self, task, solution, settings):
+        time.sleep(0.2)
+        return super().submit(task, solution, settings)
+
+
+def test_a_spent_time_budget_leaves_the_comparison_and_the_simplification_to_the_report(
+    tmp_path, monkeypatch
+):
+    """A time budget holds: once it is spent, the runner records the assessment but not the
+    comparison of forms nor the simplification, and says so; the end screen names the
+    command that does both, and the report does them."""
+    from sga_agent.cli.progress import print_result
+    from sga_agent.report.findings import DEFERRED
+
+    ComparingTask.handed = []
+    store, result = run_through_the_runner(tmp_path, monkeypatch, ComparingTask(),
+                                           (5.0, 3.0, 7.0, 1.0, 1.5, 4.0), SlowLossInCode(),
+                                           max_seconds=0.5)  # fmt: skip
+    summary = store.summary()
+    assert summary["stopped"] == "max_seconds=0.5 reached"  # after the first iteration
+    found = summary["findings"]
+    assert found["verdict"] == "the best law does not reproduce the motion"  # assessed
+    assert found["identifiability"] is None and found["simplified"] is None
+    assert found["deferred"] == DEFERRED and ComparingTask.handed == []
+    screen = Console(file=io.StringIO(), width=80, record=True, color_system=None)
+    print_result(screen, store, result, False, ComparingTask(), config())
+    assert f"identifiability: {DEFERRED}" in screen.export_text()
+
+    monkeypatch.setattr("sga_agent.report.build.load_or_none",
+                        lambda name: as_task(ComparingTask()))  # fmt: skip
+    report = CliRunner().invoke(main, ["report", str(store.path), "--json"])
+    assert report.exit_code == 0, report.output
+    again = json.loads(report.stdout)["findings"]
+    assert again["identifiability"]["sentence"] and again["simplified"] and not again["deferred"]
 
 
 class UnstableScreens(TwoFidelities):
