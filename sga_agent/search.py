@@ -203,6 +203,7 @@ class Search:
             self._emit(ev.IterationDone(iteration, top, tokens, self.totals.cost_usd - spent[1]))
             if stopped:
                 break
+        self._budget_reached()  # the run's seconds up to its end, not to the last check
         result = SearchResult(
             self.heap, self.totals, stopped, self.heap.top(self.loop.top_k), self._interrupted
         )

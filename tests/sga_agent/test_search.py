@@ -452,6 +452,7 @@ def test_the_time_budget_stops_the_evaluations_running_at_it_and_a_resume_evalua
     result = Search(cfg, FakeTask(), Scripted(answers), evaluator, store).run()
     assert time.monotonic() - started < 5 and evaluator.terminated
     assert result.stopped == "max_seconds=1.0 reached" and result.interrupted == ["01-explore-00"]
+    assert result.totals.seconds >= 1.0  # spent: the runner then leaves the comparison of forms
     assert json.loads((store.path / "summary.json").read_text())["interrupted"] == ["01-explore-00"]
     events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
     stops = [event for event in events if event["type"] == "evaluations_stopped"]
