@@ -81,8 +81,9 @@ def quick_screening(
     fits: with multi's own defaults, 0.1 and the bar at the best, the main command of the
     release before ended at 1.60e-5 against 3.99e-6 in the same time). A budgeted search
     fits every candidate in full unless told otherwise (the discovery benchmark's rows were
-    measured so); ``--fidelity multi`` there takes multi's defaults, which bought 6.7x the
-    candidates in equal time (``benchmarks/fidelity.py``)."""
+    measured so); ``--fidelity multi`` there takes multi's defaults, which buy several times
+    the candidates in equal time (``benchmarks/fidelity.py``; its figures are on the
+    benchmarks page)."""
     fidelity = settings.get("fidelity")
     if preset != "quick" or settings.get("max_seconds") is not None or fidelity == "full":
         return {}
