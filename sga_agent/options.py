@@ -88,8 +88,13 @@ def options_json(options: Any) -> str:
         raise TypeError(f"task options must be JSON-serialisable: {error}") from error
 
 
+def option_names(options_type: type) -> tuple[str, ...]:
+    """The names of the options ``options_type`` (a task's options dataclass) declares."""
+    return tuple(field.name for field in dataclasses.fields(options_type))
+
+
 def _check_known(options_type: type, given: Mapping[str, Any], task: str) -> None:
-    names = [field.name for field in dataclasses.fields(options_type)]
+    names = option_names(options_type)
     for key in given:
         if key not in names:
             close = difflib.get_close_matches(key, names, n=1)

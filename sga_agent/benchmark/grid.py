@@ -12,7 +12,6 @@ processes, ``parallel`` at a time, each with its own sandbox workers.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import multiprocessing
 import re
@@ -27,7 +26,7 @@ from typing import Any
 from sga_agent import registry, runner
 from sga_agent.config import ConfigError, SearchConfig
 from sga_agent.events import IterationDone, RunResumed
-from sga_agent.options import OptionError
+from sga_agent.options import OptionError, option_names
 from sga_agent.run_store import CONFIG, EVENTS, SUMMARY, RunStore, RunStoreError
 from sga_agent.task import TaskBase, configured
 
@@ -120,9 +119,10 @@ def plan_cells(
     """
     _check_axes(tasks, methods, seeds)
     loaded_tasks = {task: _load(task) for task in tasks}
+    declared = {name: set(option_names(task.options_type)) for name, task in loaded_tasks.items()}
     cells = []
     for task, loaded in loaded_tasks.items():
-        own = _options_of(task, options or {}, loaded_tasks)
+        own = _options_of(task, options or {}, declared)
         for method in methods:
             try:
                 typed = runner.task_options(loaded, own, method.proposer)
@@ -153,13 +153,12 @@ def plan_cells(
 
 
 def _options_of(
-    task: str, options: Mapping[str, str], tasks: Mapping[str, TaskBase]
+    task: str, options: Mapping[str, str], declared: Mapping[str, set[str]]
 ) -> dict[str, str]:
-    """The shared ``options`` that ``task`` declares: an option goes to the tasks of the grid
-    that have it (``steps`` to the constitutive tasks of a grid with a molecule task). An option
-    no task of the grid has is given to every task, whose check then names it as unknown."""
-    declared = {name: {field.name for field in dataclasses.fields(loaded.options_type)}
-                for name, loaded in tasks.items()}  # fmt: skip
+    """The shared ``options`` that ``task`` declares (``declared``: each task's option names):
+    an option goes to the tasks of the grid that have it (``steps`` to the constitutive tasks of
+    a grid with a molecule task). An option no task of the grid has is given to every task,
+    whose check then names it as unknown."""
     unknown = {key for key in options if not any(key in names for names in declared.values())}
     return {key: value for key, value in options.items() if key in declared[task] | unknown}
 
