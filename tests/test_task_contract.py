@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from sga_agent.registry import load_task, task_names
-from sga_agent.task import CodeRejected, Evaluation, PromptParts, TaskBase, as_task
+from sga_agent.task import CodeRejected, Evaluation, PromptParts, TaskBase, as_task, has_hook
 from sga_agent.testing import ContractError, check_task
 from tests.tasks.observed.conftest import observation_arrays
 
@@ -86,6 +86,9 @@ def test_a_plugin_that_does_not_subclass_task_base_gets_the_defaults():
     assert task.assess(None, {}, {}, False) is None
     with pytest.raises(CodeRejected):
         task.check_solution("one")  # its own
+    assert has_hook(task, "check_solution") and not has_hook(task, "compare_forms")
+    assert has_hook(as_task(load_task("granular")), "compare_forms")  # a subclass's own
+    assert not has_hook(as_task(load_task("homo")), "compare_forms")
 
 
 class Broken(example_plugin().NumbersTask):

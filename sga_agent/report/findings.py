@@ -26,8 +26,8 @@ from sga_agent.task import (
     FormComparison,
     Simplified,
     Task,
-    TaskBase,
     as_task,
+    has_hook,
     solution_with_parameters,
 )
 
@@ -101,12 +101,6 @@ class Findings:
             "duration_s": self.duration_s,
             "deferred": DEFERRED if self.deferred else None,
         }
-
-
-def _compares(task: TaskBase) -> bool:
-    """Whether ``task`` compares forms or simplifies a solution (has either hook of its own)."""
-    return any(getattr(getattr(task, hook), "__func__", None) is not getattr(TaskBase, hook)
-               for hook in ("compare_forms", "simplify"))  # fmt: skip
 
 
 def _ratio(numerator: float, denominator: float) -> float | None:
@@ -199,7 +193,8 @@ def find(
             )
         except Exception as error:  # any failure of the task's check loses only these facts
             findings.assessment_error = f"{type(error).__name__}: {error}"
-        findings.deferred = simulate and not compare and _compares(assessed)
+        findings.deferred = simulate and not compare and any(
+            has_hook(assessed, hook) for hook in ("compare_forms", "simplify"))
         if simulate and compare and findings.assessment is not None and not findings.changed:
             try:
                 findings.forms = assessed.compare_forms(forms, options, run.path)

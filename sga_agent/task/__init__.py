@@ -40,6 +40,7 @@ from sga_agent.task.protocol import (
     TaskBase,
     as_task,
     configured,
+    has_hook,
     options_type,
     solution_with_parameters,
 )
@@ -74,6 +75,7 @@ __all__ = [
     "Code", "CodeRejected", "Evaluation", "EvaluationSettings", "FitProgress", "FormComparison",
     "Image", "InvalidSolution", "NoOptions", "Parent", "Probe", "Problem", "PromptParts",
     "ReportView", "Section", "Simplified", "Table", "Task", "TaskBase", "TaskKind", "Text",
-    "as_task", "compared", "configured", "is_out_of_memory", "options_type", "progress_to",
-    "release_freed_memory", "report_progress", "solution_with_parameters", "within_noise",
+    "as_task", "compared", "configured", "has_hook", "is_out_of_memory", "options_type",
+    "progress_to", "release_freed_memory", "report_progress", "solution_with_parameters",
+    "within_noise",
 ]  # fmt: skip

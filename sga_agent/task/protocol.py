@@ -288,7 +288,7 @@ HOOKS = tuple(name for name in vars(TaskBase) if not name.startswith("_"))
 
 class _Adapted(TaskBase):
     """A plugin that does not subclass :class:`TaskBase`: its own members, else the defaults.
-    The one place that looks at which hooks a plugin has."""
+    With :func:`has_hook`, the one place that looks at which hooks a plugin has."""
 
     def __init__(self, plugin: Task) -> None:
         self.plugin = plugin
@@ -298,6 +298,12 @@ class _Adapted(TaskBase):
 
     def __repr__(self) -> str:
         return repr(self.plugin)
+
+
+def has_hook(task: TaskBase, name: str) -> bool:
+    """Whether ``task`` (a :class:`TaskBase`, or a plugin through :func:`as_task`) has hook
+    ``name`` of its own rather than :class:`TaskBase`'s default."""
+    return getattr(getattr(task, name), "__func__", None) is not getattr(TaskBase, name)
 
 
 def as_task(task: Task) -> TaskBase:
