@@ -1,6 +1,6 @@
 """``python -m sga_agent``: the ``sga-agent`` command line."""
 
-from sga_agent.cli import main
+from sga_agent.cli import run
 
 if __name__ == "__main__":
-    main(prog_name="sga-agent")
+    run()

@@ -363,6 +363,12 @@ class ModelConfig:
             object.__setattr__(self, "price", values)
 
 
+#: The share of a time budget a run's end is given (the best law's assessment, after the
+#: evaluations), and its most seconds.
+END_SHARE = 0.03
+END_SECONDS = 30.0
+
+
 @dataclass(frozen=True)
 class Budgets:
     """Limits at which a run stops cleanly (None: none): ``max_usd`` spent on the model,
@@ -371,7 +377,9 @@ class Budgets:
     :meth:`spent_of`; the loop checks them all through :meth:`exceeded`, before each
     iteration, each request to the proposer and each evaluation it submits. Evaluations
     already submitted finish, except at ``max_seconds``: those still running then are
-    stopped, where the evaluator can stop them, and left for a resume."""
+    stopped, where the evaluator can stop them, and left for a resume. The evaluations of a
+    time budget end :meth:`kept_for_end` seconds before it, the time a run's end (the best
+    law's assessment) is given."""
 
     max_usd: float | None = None
     max_tokens: int | None = None
@@ -393,13 +401,25 @@ class Budgets:
             "max_seconds": totals.seconds,
         }
 
-    def exceeded(self, totals: Totals, names: tuple[str, ...] | None = None) -> str:
+    def kept_for_end(self) -> float:
+        """Seconds of the time budget kept for a run's end, after its evaluations: a share
+        (:data:`END_SHARE`) of ``max_seconds``, at most :data:`END_SECONDS`; 0 without one."""
+        if self.max_seconds is None:
+            return 0.0
+        return min(END_SHARE * self.max_seconds, END_SECONDS)
+
+    def exceeded(
+        self, totals: Totals, names: tuple[str, ...] | None = None, kept: float = 0.0
+    ) -> str:
         """The first budget (of ``names``; default all) ``totals`` has reached, as
-        "max_usd=5.0 reached"; "" if none."""
+        "max_usd=5.0 reached"; "" if none. ``kept`` seconds of the time budget count as
+        spent (see :meth:`kept_for_end`)."""
         for name, spent in self.spent_of(totals).items():
             if names is not None and name not in names:
                 continue
             limit = getattr(self, name)
+            if name == "max_seconds":
+                spent += kept
             if limit is not None and spent >= limit:
                 return self.reached(name)
         return ""

@@ -63,10 +63,13 @@ class SandboxReady(Event):
 
 @dataclass(frozen=True)
 class SearchStarted(Event):
-    """The search loop began; ``resumed`` when the run already held evaluations."""
+    """The search loop began; ``resumed`` when the run already held evaluations;
+    ``start_up``: the seconds its session spent before (the program's start-up), which count
+    in the run's wall time."""
 
     type: ClassVar[str] = "search_started"
     resumed: bool
+    start_up: float | None = None
 
 
 @dataclass(frozen=True)

@@ -76,7 +76,8 @@ _HELD: dict[Path, IO[str]] = {}
 class Recorded:
     """What a run folder already holds: model answers, full-fidelity evaluations and screens
     (a multi-fidelity search's cheaper evaluations), by candidate id, and the wall seconds its
-    searches ran (each from its ``search_started`` to its last event)."""
+    searches ran (each from its ``search_started``, plus the start-up before it, to its last
+    event)."""
 
     proposals: dict[str, dict[str, Any]] = field(default_factory=dict)
     evaluations: dict[str, Evaluation] = field(default_factory=dict)
@@ -249,6 +250,7 @@ class RunStore:
                 if started is not None and last is not None:
                     recorded.seconds += last - started
                 started = moment
+                recorded.seconds += event.get("start_up") or 0.0
             last = moment if isinstance(moment, (int, float)) else last
             if kind == ev.ProposalReceived.type:
                 recorded.proposals[event["candidate"]] = event["proposal"]

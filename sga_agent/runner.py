@@ -139,10 +139,13 @@ def run(
     on_event: Callable[[dict[str, Any]], None] | None = None,
     proposer: Proposer | None = None,
     task: Task | None = None,
+    started: float | None = None,
 ) -> SearchResult:
     """Run (or continue) the search ``config`` describes, recording into ``store``. ``task``
     is the run's task set up for its options (:func:`~sga_agent.task.configured`), resolved
-    from ``config.task`` unless given; the proposer is ``make_proposer``'s unless given."""
+    from ``config.task`` unless given; the proposer is ``make_proposer``'s unless given.
+    ``started`` is the :func:`time.monotonic` instant the session's wall time counts from
+    (default: the search's start; the ``sga-agent`` program counts from its process's start)."""
     if task is None:
         task = configured(registry.load_task(config.task), config.task_options)
     if proposer is None:
@@ -150,9 +153,10 @@ def run(
     store.record_provenance(as_task(task).provenance(config.task_options))
     with make_pool(config) as pool:
         store.append(pool_record(pool))
-        search = Search(config, task, proposer, pool, store, on_event)
+        search = Search(config, task, proposer, pool, store, on_event, started)
         result = search.run()
-    spent = config.budgets.exceeded(result.totals, ("max_seconds",))
+    budgets = config.budgets
+    spent = budgets.exceeded(result.totals, ("max_seconds",), kept=budgets.kept_for_end())
     record_findings(store, task, config.task_options, compare=not spent)
     return result
 

@@ -120,6 +120,10 @@ class Search:
         Called with every event (progress display), recorded or only shown (see
         :mod:`sga_agent.events`); the progress notes of running evaluations come from the
         evaluator's threads.
+    started : float, optional
+        The :func:`time.monotonic` instant this session's wall time counts from (default: the
+        construction; the command line passes its process's start, so that a time budget
+        covers the start-up).
     """
 
     def __init__(
@@ -130,6 +134,7 @@ class Search:
         evaluator: Evaluator,
         store: RunStore,
         on_event: Callable[[dict[str, Any]], None] | None = None,
+        started: float | None = None,
     ) -> None:
         wanted = options_type(task)
         if not isinstance(config.task_options, wanted):
@@ -162,7 +167,8 @@ class Search:
         self.heap = SolutionHeap(config.loop.parsimony)
         self.totals = Totals(seconds=recorded.seconds)
         self._seconds_before = recorded.seconds  # the run's earlier sessions
-        self._started = time.monotonic()
+        self._started = time.monotonic() if started is None else started
+        self._kept_for_end = config.budgets.kept_for_end()
         self.settings: EvaluationSettings = config.evaluation_settings()
         self._deadline = ""  # the time budget, once it stopped running evaluations
         self._interrupted: list[str] = []  # the candidates whose evaluations it stopped
@@ -179,7 +185,8 @@ class Search:
             model, or a provider that gave up after its retries); the answers received before
             are evaluated and the run stays resumable, without a summary.
         """
-        self._emit(ev.SearchStarted(resumed=bool(self._evaluations)))
+        start_up = round(time.monotonic() - self._started, 2)  # before the loop: the set-up
+        self._emit(ev.SearchStarted(bool(self._evaluations), start_up or None))
         self._evaluate_all([(SEED, self.task.seed_solution(), None)])
         stopped = ""
         for iteration in range(1, self.loop.iterations + 1):
@@ -512,7 +519,7 @@ class Search:
         if limit is None:
             return None
         self._budget_reached()
-        return max(limit - self.totals.seconds, 0.0)
+        return max(limit - self._kept_for_end - self.totals.seconds, 0.0)
 
     def _submit(
         self,
@@ -589,9 +596,10 @@ class Search:
     # ------------------------------------------------------------------ bookkeeping
 
     def _budget_reached(self) -> str:
-        """The budget the run has reached ("" if none)."""
+        """The budget the run has reached ("" if none), the end's share of the time budget
+        counted as spent."""
         self.totals.seconds = self._seconds_before + time.monotonic() - self._started
-        return self.config.budgets.exceeded(self.totals)
+        return self.config.budgets.exceeded(self.totals, kept=self._kept_for_end)
 
     def _submission_refused(self, submitted: int) -> str:
         """The budget that forbids submitting one more evaluation, with ``submitted`` of this
@@ -599,7 +607,8 @@ class Search:
         hand are paid for already)."""
         self._budget_reached()
         spent = dataclasses.replace(self.totals, evaluations=self.totals.evaluations + submitted)
-        return self.config.budgets.exceeded(spent, ("max_evaluations", "max_seconds"))
+        limits = ("max_evaluations", "max_seconds")
+        return self.config.budgets.exceeded(spent, limits, kept=self._kept_for_end)
 
     def _emit(self, event: ev.Event) -> None:
         """Record ``event``, then show it."""

@@ -10,6 +10,7 @@ from rich.console import Console
 
 from sga_agent import registry, runner
 from sga_agent.cli import main
+from sga_agent.cli.clock import command_started
 from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
 from sga_agent.cli.options import (
     Duration,
@@ -176,10 +177,11 @@ def from_preset(name: str) -> str:
 @click.option("--max-tokens", type=click.IntRange(min=1), help="Budget in tokens.")
 @click.option("--max-evaluations", type=click.IntRange(min=1), help="Budget in evaluations.")
 @click.option("--time-budget", "max_seconds", type=Duration(),
-              help="Budget in wall time, e.g. 15m or 1h30m (a resume counts the time the run "
-              "already took). At it, the evaluations running are stopped, recorded as "
-              "stopped and left for a resume; the best found is then assessed. Without "
-              "--iterations the search iterates until it.")
+              help="Budget in wall time from the program's start, e.g. 15m or 1h30m (a "
+              "resume counts the time the run already took). The evaluations running 3 % "
+              "before it (30 s at most) are stopped, recorded as stopped and left for a "
+              "resume; the best found is assessed in that time. Without --iterations the "
+              "search iterates until it.")
 @click.option("--seed", type=int, default=default("seed"), show_default=True,
               help="Seed of the run.")
 @click.option("--out-dir", "out", type=click.Path(file_okay=False, path_type=Path),
@@ -309,7 +311,7 @@ def execute(
             interrupts_stop_the_search(),
             SearchProgress(shown, config, recorded, assessing) as progress,
         ):
-            result = runner.run(config, store, progress, proposer, task)
+            result = runner.run(config, store, progress, proposer, task, command_started())
     except RayUnavailableError as error:  # no cluster: stop
         if new_run and not store.recorded().evaluations:  # it never started
             store.unlock()

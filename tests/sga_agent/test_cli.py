@@ -174,6 +174,18 @@ def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkey
     assert not any(tmp_path.iterdir())  # no run folder
 
 
+def test_the_program_s_clock_starts_with_its_process():
+    """A time budget covers the start-up: the clock a program reads started with its process,
+    here a second of waiting before anything of the project was imported."""
+    program = (
+        "import time; time.sleep(1.0); from sga_agent.cli.clock import process_started; "
+        "print(time.monotonic() - process_started())"
+    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert 0.98 <= float(done.stdout) < 10.0
+
+
 def test_a_missing_key_is_reported_before_litellm_is_imported(tmp_path):
     """A fresh process, as a user runs it: the missing key is named in under 2 s (litellm
     alone takes seconds to import)."""

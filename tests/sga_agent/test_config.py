@@ -154,6 +154,19 @@ def test_budgets_stop_at_the_first_limit_reached():
     assert Budgets().exceeded(Totals(tokens=10**9, cost_usd=1e9, evaluations=10**9)) == ""
 
 
+def test_a_time_budget_keeps_its_last_share_for_the_run_s_end():
+    """The evaluations of a 5-minute budget end 9 s before it, for the best's assessment;
+    the share is at most 30 s, and nothing is kept without a time budget."""
+    five = Budgets(max_seconds=300.0)
+    assert five.kept_for_end() == pytest.approx(9.0)
+    assert Budgets(max_seconds=7200.0).kept_for_end() == 30.0
+    assert Budgets(max_evaluations=3).kept_for_end() == 0.0
+    kept = five.kept_for_end()
+    assert five.exceeded(Totals(seconds=292.0), kept=kept) == "max_seconds=300.0 reached"
+    assert five.exceeded(Totals(seconds=290.0), kept=kept) == ""
+    assert five.exceeded(Totals(seconds=299.0)) == ""  # the end itself may use the share
+
+
 def test_the_config_survives_its_json_with_the_task_options_typed():
     config = SearchConfig.from_preset("cot", task="granular", proposer="builtin", seed=2,
                                       task_options=ConstitutiveOptions(steps=20))  # fmt: skip

@@ -185,6 +185,21 @@ def test_a_resumed_run_counts_the_time_its_earlier_sessions_took(tmp_path):
     assert result.stopped == "max_seconds=120 reached"  # only the seed was evaluated
 
 
+def test_the_time_before_the_search_counts_in_its_budget_and_its_record(tmp_path):
+    """A session given the instant its program started (``started``) counts the start-up:
+    in the budget, in the run's seconds and in what a resume reads back."""
+    cfg = config(max_seconds=120)
+    store = RunStore.create(tmp_path, cfg, {})
+    started = time.monotonic() - 130.0  # a start-up longer than the budget
+    result = Search(cfg, FakeTask(), Scripted([]), LossInCode(), store, started=started).run()
+    assert result.stopped == "max_seconds=120 reached"  # only the seed was evaluated
+    assert result.totals.seconds >= 130.0
+    events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
+    (begun,) = [event for event in events if event["type"] == "search_started"]
+    assert begun["start_up"] >= 130.0
+    assert store.recorded().seconds == pytest.approx(result.totals.seconds, abs=0.5)
+
+
 def test_resume_reuses_answers_and_evaluations(tmp_path):
     answers = [LAW.format(value=v) for v in (5.0, 3.0, 7.0, 1.0, 2.0, 4.0)]
     full, full_store, *_ = run(tmp_path / "full", answers)
@@ -452,7 +467,8 @@ def test_the_time_budget_stops_the_evaluations_running_at_it_and_a_resume_evalua
     result = Search(cfg, FakeTask(), Scripted(answers), evaluator, store).run()
     assert time.monotonic() - started < 5 and evaluator.terminated
     assert result.stopped == "max_seconds=1.0 reached" and result.interrupted == ["01-explore-00"]
-    assert result.totals.seconds >= 1.0  # spent: the runner then leaves the comparison of forms
+    # spent, with the end's share: the runner then leaves the comparison of forms
+    assert result.totals.seconds + cfg.budgets.kept_for_end() >= 1.0
     assert json.loads((store.path / "summary.json").read_text())["interrupted"] == ["01-explore-00"]
     events = [json.loads(line) for line in (store.path / "events.jsonl").read_text().splitlines()]
     stops = [event for event in events if event["type"] == "evaluations_stopped"]
