@@ -10,6 +10,20 @@ specific to a task (its free run, its molecules) comes from the task's report ho
 
 from __future__ import annotations
 
-from sga_agent.report.build import build_report
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sga_agent.report.build import build_report
 
 __all__ = ["build_report"]
+
+
+def __getattr__(name: str) -> Any:
+    """``build_report``, imported when first asked for: it brings matplotlib, which a command
+    that only reaches this package's :mod:`.heartbeat` (every ``sga-agent`` command line)
+    should not pay for."""
+    if name == "build_report":
+        from sga_agent.report.build import build_report
+
+        return build_report
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

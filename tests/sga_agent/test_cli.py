@@ -174,6 +174,18 @@ def test_a_search_without_the_models_key_stops_before_it_starts(tmp_path, monkey
     assert not any(tmp_path.iterdir())  # no run folder
 
 
+def test_the_command_line_starts_without_the_report_s_plotting():
+    """Every command imports the report's heartbeat; matplotlib (0.4 s of a command's start)
+    comes only with a report's figures."""
+    program = (
+        "import sys; import sga_agent.cli; from sga_agent.report import heartbeat; "
+        "print('matplotlib' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "False"
+
+
 def test_the_program_s_clock_starts_with_its_process():
     """A time budget covers the start-up: the clock a program reads started with its process,
     here a second of waiting before anything of the project was imported."""

@@ -65,7 +65,7 @@ def command(out: Path, url: str) -> list[str]:
     return [
         sys.executable, "-m", "sga_agent", "search", "--task", "elastic", "--model",
         "openai/standin", "--api-base", url, "--iterations", "2", "--exploit", "1", "--explore",
-        "6", "--top-k", "3", "--epochs", "1", "--option", "steps=100", "--workers", "2",
+        "6", "--top-k", "3", "--epochs", "1", "--option", "steps=20", "--workers", "2",
         "--timeout", "300", "--request-timeout", "3", "--retries", "1", "--out-dir", str(out),
     ]  # fmt: skip
 
