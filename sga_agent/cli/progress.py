@@ -450,12 +450,16 @@ def print_result(
             console.print(line)
         if natural := natural_values_of(task, best.code, best.parameters):
             console.print("fitted, in natural units: " + "; ".join(map(str, natural.values())))
+        if findings.get("best_formula"):
+            console.print(f"as a formula: {findings['best_formula']}", soft_wrap=True)
         console.print(_solution_label(task, bool(best.parameters)))
         code = solution_with_parameters(task, best.code, best.parameters)
         console.out(code, highlight=False)  # as written: never wrapped, so it can be copied
         if simple := findings.get("simplified"):
             console.print(f"simplified: {simple['sentence']}:")
             console.out(simple["solution"], highlight=False)
+            if simple.get("formula"):
+                console.print(f"as a formula: {simple['formula']}", soft_wrap=True)
     else:
         console.print("no valid solution was found")
     console.print(_counts(recorded.values(), run.screens.values(), result, uses_a_model(config)))

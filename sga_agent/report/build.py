@@ -123,9 +123,13 @@ def summary_section(
         blocks.append(Text("The best solution, its fitted constants written in:" if fitted
                            else "The best solution (nothing fitted):"))  # fmt: skip
         blocks.append(Code(findings.best_code, "python"))
+        if findings.best_formula:
+            blocks.append(Text(f"As a formula: `{findings.best_formula}`"))
         if findings.simplified is not None:
             blocks += [Text(f"Simplified: {findings.simplified.sentence}."),
                        Code(findings.simplified.solution, "python")]  # fmt: skip
+            if findings.simplified.formula:
+                blocks.append(Text(f"As a formula: `{findings.simplified.formula}`"))
         elif findings.simplified_error:
             blocks.append(Text(f"The task could not simplify it: {findings.simplified_error}"))
         derived = assessment.derived if assessment else {}

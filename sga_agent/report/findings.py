@@ -47,6 +47,7 @@ class Findings:
     best: Candidate | None
     seed: Candidate | None
     best_code: str = ""
+    best_formula: str = ""  # the task's formula of the best (Task.formula), if it writes one
     assessment: Assessment | None = None
     assessment_error: str = ""
     forms: FormComparison | None = None
@@ -86,6 +87,7 @@ class Findings:
             "truth_loss": assessment.get("truth_loss"),
             "best_over_truth": self.best_over_truth,
             "best_solution": self.best_code or None,
+            "best_formula": self.best_formula or None,
             "parameters": self.best.parameters if self.best else {},
             "derived": assessment.get("derived", {}),
             "free_run": assessment.get("free_run"),
@@ -178,6 +180,11 @@ def find(
     if task is None:
         return findings
     task = as_task(task)
+    if best is not None:
+        try:
+            findings.best_formula = task.formula(best.code, best.parameters)
+        except Exception:  # a formula is a courtesy: its failure loses only it
+            findings.best_formula = ""
     forms = distinct(run, task, FORMS)  # each candidate's key computed once
     if best is not None:
         try:

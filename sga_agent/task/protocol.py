@@ -150,6 +150,12 @@ class TaskBase:
         of a search, reports); it must not run the solution's code. Default: unchanged."""
         return solution
 
+    def formula(self, solution: str, parameters: dict[str, float]) -> str:
+        """``solution`` as one formula with its fitted ``parameters`` in, for people to read
+        beside its code (a genetic-programming law: ``F_corrected = 0.31*F + ...``), where
+        the task can write one; it must not run the solution's code. Default: "" (none)."""
+        return ""
+
     def parameter_units(self, solution: str, names: Sequence[str]) -> dict[str, str]:
         """The units of the quantities ``names`` stand for in ``solution``, by name, for people
         to read (``sga-agent evaluate``, the end of a search): ``{"friction_angle": "deg"}``.

@@ -242,6 +242,8 @@ class Simplified:
         The loss with them, computed the same way.
     band : float
         The loss the noise allows (:func:`~sga_agent.task.within_noise` of ``base_loss``).
+    formula : str
+        The simplified solution as one formula, where the task writes one (``Task.formula``).
     """
 
     solution: str
@@ -249,6 +251,7 @@ class Simplified:
     loss: float
     base_loss: float
     band: float
+    formula: str = ""
 
     @property
     def sentence(self) -> str:
@@ -261,4 +264,5 @@ class Simplified:
 
     def to_dict(self) -> dict[str, Any]:
         return {"solution": self.solution, "dropped": self.dropped, "loss": self.loss,
-                "base_loss": self.base_loss, "band": self.band, "sentence": self.sentence}
+                "base_loss": self.base_loss, "band": self.band, "sentence": self.sentence,
+                "formula": self.formula or None}

@@ -7,8 +7,8 @@ ask for: the sand's law found with an extra cylinder, an elastic law with a thir
 of the stiffness. Terms are tried one at a time, the others kept at their fitted values, each
 drop kept while the loss stays within the noise; nothing is refitted, so what is dropped is
 dropped at no cost the data can see. The simplified law is printed from its genome (text
-only); its losses come from the captured graph of the winner, never from running code. A law
-a model wrote has no genome: it is not simplified.
+only), as code and as a formula; its losses come from the captured graph of the winner, never
+from running code. A law a model wrote has no genome: it is not simplified.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from dataclasses import replace
 
 from sga_agent.task import Simplified, within_noise
 from tasks.constitutive.gp.codegen import genome_from_code, law_code, parameter_names, with_values
+from tasks.constitutive.gp.formula import formula
 from tasks.constitutive.gp.genome import Genome, params
 
 #: A raw coefficient that makes its term vanish, by the coefficient's transform: exp(-50) and
@@ -70,5 +71,6 @@ def simplify(
     names = coefficient_names(genome)
     kept = tuple(term for index, term in enumerate(with_values(genome, parameters).terms)
                  if index not in dropped)  # fmt: skip
-    return Simplified(law_code(replace(genome, terms=kept)),
-                      [f"the term scaled by {names[i]}" for i in dropped], loss, base, band)
+    simpler = replace(genome, terms=kept)
+    return Simplified(law_code(simpler), [f"the term scaled by {names[i]}" for i in dropped],
+                      loss, base, band, formula(simpler))  # fmt: skip

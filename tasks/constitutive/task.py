@@ -160,6 +160,15 @@ class ConstitutiveTask(TaskBase):
 
         return compare_task_forms(self.spec, candidates, options, folder)
 
+    def formula(self, solution: str, parameters: dict[str, float]) -> str:
+        """A genetic-programming law as one formula, its sums and blends collected by SymPy
+        (:mod:`tasks.constitutive.gp.formula`); "" for a law a model wrote."""
+        from tasks.constitutive.gp.codegen import genome_from_code, with_values
+        from tasks.constitutive.gp.formula import formula
+
+        genome = genome_from_code(solution, self.spec.searched)
+        return "" if genome is None else formula(with_values(genome, parameters))
+
     def simplify(
         self, candidate: CandidateRecord, options: ConstitutiveOptions
     ) -> Simplified | None:

@@ -173,6 +173,24 @@ def test_the_final_screen_says_whether_the_data_determine_the_law(tmp_path):
     assert "simplified: 1 of its parts costs less than the noise:\n" + simpler in text
 
 
+def test_the_final_screen_writes_the_task_s_formula_of_the_best_on_one_line(tmp_path):
+    cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=0), proposer="builtin")
+    store = RunStore.create(tmp_path, cfg, {})
+    result = Search(cfg, FakeTask(), Scripted([LAW.format(value=10.0)]), FittedScale(),
+                    store).run()  # fmt: skip
+    best = "F_corrected = 0.3055*F + 0.6124*U diag(exp(vol(eps))) Vh + 0.082*R"
+    simpler = "F_corrected = 0.3055*F + 0.6124*U diag(exp(vol(eps))) Vh"
+    findings = {"best_formula": best,
+                "simplified": {"sentence": "1 of its parts costs less than the noise",
+                               "solution": "class Physics:\n    pass\n", "formula": simpler}}
+    store.save_summary({**store.summary(), "findings": findings})
+    screen = console(WIDTHS[0])
+    print_result(screen, store, result, False, ElasticTask(), cfg)
+    text = screen.export_text()
+    assert f"as a formula: {best}\nits code, with the fitted constants written in:" in text
+    assert f"class Physics:\n    pass\n\nas a formula: {simpler}\n" in text
+
+
 def test_the_final_count_of_a_multi_fidelity_search_names_its_screens(tmp_path):
     cfg = dataclasses.replace(config(iterations=1, exploit=1, explore=1), proposer="builtin")
     store = RunStore.create(tmp_path, cfg, {})
