@@ -78,7 +78,7 @@ def search_command(out: Path, *source: str) -> list[str]:
     return [
         sys.executable, "-m", "sga_agent", "search", "--task", "elastic", *source,
         "--iterations", "1", "--exploit", "2", "--explore", "4", "--top-k", "3",
-        "--epochs", "1", "--option", "steps=100", "--workers", "2", "--timeout", "300",
+        "--epochs", "1", "--option", "steps=20", "--workers", "2", "--timeout", "300",
         "--out-dir", str(out), "--json",
     ]  # fmt: skip
 
