@@ -186,6 +186,7 @@ def test_the_command_line_starts_without_the_report_s_plotting():
     assert done.stdout.strip() == "False"
 
 
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc: the call's clock")
 def test_the_program_s_clock_starts_with_its_process():
     """A time budget covers the start-up: the clock a program reads started with its process,
     here a second of waiting before anything of the project was imported."""
