@@ -28,5 +28,4 @@ def command_started() -> float:
     """The :func:`time.monotonic` instant the running command's wall time counts from: its
     process's start for the ``sga-agent`` program, the command's call when ``main`` is called
     in a running process (a test's ``CliRunner``, a notebook)."""
-    root = click.get_current_context().find_root()
-    return root.ensure_object(dict).setdefault(STARTED, time.monotonic())
+    return click.get_current_context().find_root().obj[STARTED]  # set by ``main``

@@ -14,9 +14,6 @@ it stays finite.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-
 import sympy
 from sympy.printing.str import StrPrinter
 
@@ -29,14 +26,6 @@ DIGITS = 4
 #: A term of a sum whose coefficient is this small beside the largest one is a rounding error
 #: (the weights of F in a mixture, 1 - 0.2 - 0.5 - 0.3): it is left out.
 NEGLIGIBLE = 1e-9
-#: A raw parameter's value, by its transform (``grammar.TRANSFORMS``).
-VALUES: dict[str, Callable[[float], float]] = {
-    "log": math.exp,
-    "sigmoid": lambda raw: 1.0 / (1.0 + math.exp(-raw)),
-    "tanh": math.tanh,
-    "linear": lambda raw: raw,
-    "unit": lambda raw: min(raw, 1.0),
-}
 #: The terminals, as symbols (a matrix's symbol does not commute).
 _TERMINALS = {
     (MATRIX, "F"): sympy.Symbol("F", commutative=False),
@@ -68,7 +57,7 @@ _WHOLE = {
 
 def value(leaf: Param) -> sympy.Float:
     """The parameter's value (its transform of its raw value), as a SymPy number."""
-    return sympy.Float(VALUES[leaf.transform](leaf.raw))
+    return sympy.Float(grammar.TRANSFORMS[leaf.transform].value(leaf.raw))
 
 
 def _written(number: sympy.Float) -> sympy.Number:

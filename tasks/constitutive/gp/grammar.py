@@ -36,6 +36,8 @@ operation its own variable, so children are always atomic expressions.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 MATRIX, PRINCIPAL, SCALAR = "M", "P", "S"
@@ -199,24 +201,27 @@ OP_WEIGHTS: dict[str, dict[tuple[str, str], float]] = {
 
 @dataclass(frozen=True)
 class Transform:
-    """How a parameter's raw value becomes its value, and where its raw value starts."""
+    """How a parameter's raw value becomes its value (``template`` in the law's code, ``value``
+    for a number), and where its raw value starts."""
 
     prefix: str
     template: str
     meaning: str
     initial: tuple[float, float]
     spread: float  # standard deviation of a perturbation at temperature 1
+    value: Callable[[float], float]
 
 
 TRANSFORMS = {
     "log": Transform("log_", "torch.exp(self.{})", "natural log of a positive coefficient",
-                     (-5.0, 1.0), 0.6),
+                     (-5.0, 1.0), 0.6, math.exp),
     "sigmoid": Transform("logit_", "torch.sigmoid(self.{})", "logit of a ratio in (0, 1)",
-                         (-2.0, 2.0), 0.6),
+                         (-2.0, 2.0), 0.6, lambda raw: 1.0 / (1.0 + math.exp(-raw))),
     "tanh": Transform("atanh_", "torch.tanh(self.{})", "inverse tanh of a ratio in (-1, 1)",
-                      (-1.5, 1.5), 0.4),
-    "linear": Transform("", "self.{}", "a free coefficient", (-2.0, 2.0), 0.4),
-    "unit": Transform("", "self.{}.clamp(max=1.0)", "a weight, at most 1", (0.4, 1.4), 0.3),
+                      (-1.5, 1.5), 0.4, math.tanh),
+    "linear": Transform("", "self.{}", "a free coefficient", (-2.0, 2.0), 0.4, lambda raw: raw),
+    "unit": Transform("", "self.{}.clamp(max=1.0)", "a weight, at most 1", (0.4, 1.4), 0.3,
+                      lambda raw: min(raw, 1.0)),
 }  # fmt: skip
 #: Start ranges that differ by the kind of law searched: a positive constant of a plastic law
 #: is mostly a strain-sized threshold or slope, so it starts below e^-2 = 0.135; one started
