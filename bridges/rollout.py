@@ -83,10 +83,40 @@ class State:
 
 @dataclass
 class RolloutResult:
-    """Mean squared position error and the simulated positions, (steps + 1, N, 3)."""
+    """Mean squared position error and the simulated positions: (steps + 1, N, 3) against a
+    dense trajectory, (frames, P, 3) at the frames and particles of :class:`Frames`."""
 
     loss: float
     positions: np.ndarray
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Positions observed at some steps, of some particles: what a simulation is compared with
+    when not every step and particle was seen (video frames, tracked points). It holds only
+    what was observed, so its memory does not grow with the steps between frames.
+
+    ``steps`` (frames,): increasing step indices, each at least 1; ``positions``
+    (frames, P, 3); ``particles`` (P,): which of the scene's particles were observed, None for
+    all of them in order.
+    """
+
+    steps: np.ndarray
+    positions: torch.Tensor | np.ndarray
+    particles: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        steps = np.asarray(self.steps, dtype=np.int64)
+        if steps.ndim != 1 or len(steps) == 0 or steps[0] < 1 or (np.diff(steps) <= 0).any():
+            raise ValueError("Frames.steps must be increasing step indices, each at least 1")
+        if tuple(self.positions.shape[:1]) != (len(steps),) or self.positions.shape[-1] != 3:
+            raise ValueError(f"Frames.positions must have shape ({len(steps)}, P, 3), got "
+                             f"{tuple(self.positions.shape)}")  # fmt: skip
+        object.__setattr__(self, "steps", steps)
+
+    @property
+    def last_step(self) -> int:
+        return int(self.steps[-1])
 
 
 class Rollout:
@@ -149,24 +179,34 @@ class Rollout:
                     on_step(s + 1, state)
         return state
 
-    def simulate(self, state: State | None = None, steps: int | None = None) -> np.ndarray:
-        """Positions of every step, (steps + 1, N, 3), without gradients."""
+    def simulate(
+        self, state: State | None = None, steps: int | None = None, kept: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Positions of every step, (steps + 1, N, 3), without gradients; with ``kept`` (step
+        indices, increasing), of those steps only, (len(kept), N, 3)."""
         state = state or State.initial(self.scene, self.dtype)
         steps = self.scene.steps if steps is None else steps
-        positions = [state.x.numpy().copy()]
+        wanted = None if kept is None else {int(step) for step in kept}
+        positions = [state.x.numpy().copy()] if wanted is None or 0 in wanted else []
+
+        def record(step: int, now: State) -> None:
+            if wanted is None or step in wanted:
+                positions.append(now.x.numpy().copy())
+
         with torch.no_grad():
-            self.run(state, steps, lambda s, st: positions.append(st.x.numpy().copy()))
+            self.run(state, steps, record)
+        if wanted is not None and len(positions) != len(wanted):
+            raise ValueError(f"kept steps must lie in [0, {steps}] and be distinct")
         return np.stack(positions)
 
 
 def trajectory_loss(
     rollout: Rollout,
-    observed: torch.Tensor | np.ndarray,
+    observed: torch.Tensor | np.ndarray | Frames,
     resets: dict[str, np.ndarray] | None = None,
     segment: int = 100,
     backward: bool = True,
     batch: int = 1,
-    weights: torch.Tensor | np.ndarray | None = None,
 ) -> RolloutResult:
     """Mean squared position error against ``observed``, differentiated segment by segment.
 
@@ -174,8 +214,10 @@ def trajectory_loss(
     ----------
     rollout : Rollout
         Scene and laws; the gradients accumulate in the laws' parameters' ``.grad``.
-    observed : (steps + 1, N, 3)
-        Observed positions at every step, from step 0.
+    observed : (steps + 1, N, 3) or Frames
+        Observed positions at every step, from step 0; or a :class:`Frames` of the steps and
+        particles that were observed (the simulation then runs to its last step, and neither
+        the observation nor the result holds the steps between frames).
     resets : dict of stacked states, optional
         Teacher forcing: entry i (keys x, v, C, F) is the observed state at step
         ``i * segment``; each segment then starts from it. Without, segment 0 starts from the
@@ -188,18 +230,19 @@ def trajectory_loss(
         With teacher forcing, segments of equal length run this many at a time, as one batch
         of copies of the scene. The result is the same (to round-off) for every batch size;
         memory grows with it (the graph of ``batch`` segments is held at once).
-    weights : (steps + 1, N), optional
-        Which positions are observed: each particle's squared error at each step counts with
-        its weight (0: not observed, 1: observed), and the loss is the weighted mean. Default:
-        every position counts.
 
     Raises
     ------
     LawError, UnstableSimulation
         A law returned a wrong shape, or the loss became non-finite.
     """
-    observed = torch.as_tensor(observed, dtype=rollout.dtype)
-    steps = observed.shape[0] - 1
+    if isinstance(observed, Frames):
+        if resets is not None:
+            raise ValueError("Frames are compared without teacher forcing")
+        compare: _Comparison = _SparseComparison(observed, rollout)
+    else:
+        compare = _DenseComparison(observed, rollout.dtype)
+    steps = compare.steps
     if steps < 1 or segment < 1 or batch < 1:
         raise ValueError("observed needs at least two frames; segment and batch must be >= 1")
     starts = list(range(0, steps, segment))
@@ -207,20 +250,11 @@ def trajectory_loss(
         raise ValueError(
             f"teacher forcing needs {len(starts)} reset states, got {len(resets['x'])}"
         )
-    if weights is None:
-        weights = torch.ones(observed.shape[:2], dtype=rollout.dtype)
-        weights[0] = 0.0
-    weights = torch.as_tensor(weights, dtype=rollout.dtype)
-    if tuple(weights.shape) != tuple(observed.shape[:2]):
-        raise ValueError(f"weights must have shape {tuple(observed.shape[:2])}, got "
-                         f"{tuple(weights.shape)}")  # fmt: skip
-    scale = 1.0 / (float(weights[1:].sum()) * 3)
     first = _start_state(rollout, resets, 0)
     rollout.check_laws(first)
-    positions = np.empty(tuple(observed.shape), dtype=observed.numpy().dtype)  # as simulated
-    positions[0] = first.x.numpy()
+    compare.start(first)
     if resets is None and backward:
-        return _checkpointed(rollout, observed, weights, starts, segment, scale, positions)
+        return _checkpointed(rollout, compare, starts, segment)
     total = 0.0
     if resets is None:  # forward only: one segment after the other
         groups = [[index] for index in range(len(starts))]
@@ -232,25 +266,24 @@ def trajectory_loss(
             state = State.stacked([_start_state(rollout, resets, index) for index in group])
         with torch.set_grad_enabled(backward):
             group_starts = [starts[index] for index in group]
-            loss, state = _segment(rollout, state, observed, weights, group_starts, segment,
-                                   scale, positions)  # fmt: skip
+            loss, state = _segment(rollout, state, compare, group_starts, segment)
             if backward:
                 loss.backward()
         total += loss.item()
         state = state.detached()
         del loss  # the group's graph: its steps' outputs are freed before the next group runs
-    return RolloutResult(total, positions)
+    return RolloutResult(total, compare.positions)
 
 
-def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_bytes: int) -> int:
-    """How many teacher-forced segments of ``segment`` steps fit ``budget_bytes`` of graph.
+def step_graph_bytes(rollout: Rollout, state: State) -> int:
+    """Bytes of autograd graph one differentiable step of ``state`` keeps (all its copies).
 
     Measured, not guessed: a step is run with gradients from the end of another one and what
     its graph keeps is counted (the tensors it saves, the laws' intermediates and the packed
-    input among them, and the storage of its input state); a segment holds ``segment`` such
-    steps per copy. The step's input requires a gradient, as inside a segment: otherwise
-    autograd would keep nothing for the laws' operations before their first parameter (an
-    SVD of the input, say), and the count would fall short. At least 1.
+    input among them, and the storage of its input state). The step's input requires a
+    gradient, as inside a segment: otherwise autograd would keep nothing for the laws'
+    operations before their first parameter (an SVD of the input, say), and the count would
+    fall short.
     """
     with torch.no_grad():
         previous = rollout.step(state.detached())  # its outputs are views of one packed tensor
@@ -265,7 +298,51 @@ def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_byte
 
     with torch.autograd.graph.saved_tensors_hooks(count, lambda tensor: tensor), stable_linalg():
         rollout.step(previous)  # a step's loss term keeps nothing of its own (_SquaredError)
-    return max(1, budget_bytes // max(1, sum(kept.values()) * segment))
+    return sum(kept.values())
+
+
+def segments_per_batch(rollout: Rollout, state: State, segment: int, budget_bytes: int) -> int:
+    """How many teacher-forced segments of ``segment`` steps fit ``budget_bytes`` of graph: a
+    segment holds ``segment`` steps of :func:`step_graph_bytes` per copy. At least 1."""
+    return max(1, budget_bytes // max(1, step_graph_bytes(rollout, state) * segment))
+
+
+class GraphBudgetError(MemoryError):
+    """Even the best segment length of a checkpointed gradient needs more than the budget."""
+
+
+def checkpoint_segment(
+    rollout: Rollout, steps: int, budget_bytes: int, longest: int, slack: float = 1.0
+) -> tuple[int, int]:
+    """The segment length a checkpointed gradient over ``steps`` steps runs with, at most
+    ``longest``, and the bytes it needs: one segment's graph (its steps of
+    :func:`step_graph_bytes`, measured on the rollout's laws at the scene's initial state)
+    plus the state kept at every segment's start, times ``slack``, what the process's memory
+    grows by per byte so counted (the C allocator does not reuse every hole a step's
+    temporaries leave between the tensors the graph keeps). The longest segment within
+    ``budget_bytes``; a length needs less the closer it is to sqrt(steps * state / step).
+
+    Raises :class:`GraphBudgetError` when no length fits, naming what it needs.
+    """
+    state = State.initial(rollout.scene, rollout.dtype)
+    per_step = step_graph_bytes(rollout, state)
+    per_state = sum(tensor.nbytes for tensor in state.tensors())
+
+    def needed(length: int) -> int:
+        return math.ceil(slack * (length * per_step + math.ceil(steps / length) * per_state))
+
+    fitting = [length for length in range(1, min(longest, steps) + 1)
+               if needed(length) <= budget_bytes]  # fmt: skip
+    if not fitting:
+        least = min(range(1, steps + 1), key=needed)
+        raise GraphBudgetError(
+            f"the gradient over {steps} steps of {rollout.scene.num_particles} particles needs "
+            f"{needed(least) / 2**20:.3g} MiB at least (segments of {least} steps; its graph "
+            f"{per_step / 2**20:.3g} MiB a step with this law, {slack:g}x for the allocator), "
+            f"more than the budget of {budget_bytes / 2**20:.3g} MiB"
+        )
+    length = max(fitting)
+    return length, needed(length)
 
 
 def _groups(starts: list[int], steps: int, segment: int, batch: int) -> list[list[int]]:
@@ -285,67 +362,146 @@ def _start_state(rollout: Rollout, resets, index: int) -> State:
     return State.from_arrays(resets, index, rollout.dtype)
 
 
-def _segment(rollout, state, observed, weights, starts, segment, scale, positions):
+class _Comparison:
+    """How a segment's steps are compared with the observation and what of them is kept."""
+
+    steps: int  # the last step simulated
+    scale: float  # of the summed squared errors: 1 / (3 x the observed positions)
+    positions: np.ndarray  # what the result reports as simulated
+
+    def start(self, state: State) -> None:
+        """Record the initial ``state``."""
+
+    def error(self, offset: int, state: State, starts: list[int]) -> torch.Tensor | None:
+        """The squared error of ``state`` (copies stacked, the copy of start ``starts[i]``
+        at step ``starts[i] + offset``), None when none of its steps was observed; records
+        what the result keeps."""
+        raise NotImplementedError
+
+    def first_non_finite(self, starts: list[int], length: int) -> int:
+        """The earliest non-finite step of the given segments (or the last of them)."""
+        raise NotImplementedError
+
+
+class _DenseComparison(_Comparison):
+    """Every particle observed at every step after the first; every step's positions kept."""
+
+    def __init__(self, observed, dtype: torch.dtype) -> None:
+        self.observed = torch.as_tensor(observed, dtype=dtype)
+        self.steps = self.observed.shape[0] - 1
+        self.scale = 1.0 / (self.steps * self.observed.shape[1] * 3)
+        self.positions = np.empty(tuple(self.observed.shape), dtype=self.observed.numpy().dtype)
+
+    def start(self, state: State) -> None:
+        self.positions[0] = state.x.numpy()
+
+    def error(self, offset: int, state: State, starts: list[int]) -> torch.Tensor:
+        N = self.observed.shape[1]
+        x = state.x.detach().numpy().reshape(len(starts), N, 3)
+        for copy, start in enumerate(starts):
+            self.positions[start + offset] = x[copy]
+        rows = torch.as_tensor(starts) + offset
+        return _SquaredError.apply(state.x, self.observed, rows)
+
+    def first_non_finite(self, starts: list[int], length: int) -> int:
+        bad = [
+            start + offset
+            for start in starts
+            for offset in range(1, length + 1)
+            if not np.isfinite(self.positions[start + offset]).all()
+        ]
+        return min(bad, default=starts[0] + length)
+
+
+class _SparseComparison(_Comparison):
+    """The steps and particles of :class:`Frames` observed; their simulated positions kept."""
+
+    def __init__(self, frames: Frames, rollout: Rollout) -> None:
+        dtype, N = rollout.dtype, rollout.scene.num_particles
+        self.steps = frames.last_step
+        self.rows = {int(step): row for row, step in enumerate(frames.steps)}
+        self.observed = torch.as_tensor(frames.positions, dtype=dtype)
+        particles = np.arange(N) if frames.particles is None else np.asarray(frames.particles)
+        if (
+            self.observed.shape[1] != len(particles)
+            or particles.min(initial=0) < 0
+            or (particles.max(initial=0) >= N)
+        ):
+            raise ValueError(f"Frames.particles must index the scene's {N} particles, one per "
+                             "observed column")  # fmt: skip
+        self.particles = None if frames.particles is None else torch.as_tensor(particles)
+        self.scale = 1.0 / (self.observed.shape[0] * self.observed.shape[1] * 3)
+        self.positions = np.empty(tuple(self.observed.shape), dtype=self.observed.numpy().dtype)
+        self.non_finite: int | None = None  # the first step whose positions are not finite
+
+    def error(self, offset: int, state: State, starts: list[int]) -> torch.Tensor | None:
+        step = starts[0] + offset
+        if self.non_finite is None and not torch.isfinite(state.x).all():
+            self.non_finite = step
+        row = self.rows.get(step)
+        if row is None:
+            return None
+        x = state.x if self.particles is None else state.x[self.particles]
+        self.positions[row] = x.detach().numpy()
+        difference = x - self.observed[row]
+        return (difference * difference).sum()
+
+    def first_non_finite(self, starts: list[int], length: int) -> int:
+        return starts[0] + length if self.non_finite is None else self.non_finite
+
+
+def _segment(rollout, state, compare: _Comparison, starts, segment):
     """Run the segments from ``starts`` (a batch of copies, states stacked in ``state``):
     (their scaled squared error, the stacked end state)."""
-    stop = min(starts[0] + segment, observed.shape[0] - 1)
-    length, copies, N = stop - starts[0], len(starts), observed.shape[1]
-    first = torch.as_tensor(starts)
+    stop = min(starts[0] + segment, compare.steps)
+    length = stop - starts[0]
     errors = []
+    ran = 0
 
     def record(s: int, st: State) -> None:
-        x = st.x.detach().numpy().reshape(copies, N, 3)
-        for copy, start in enumerate(starts):
-            positions[start + s] = x[copy]
-        errors.append(_SquaredError.apply(st.x, observed, weights, first + s))
+        nonlocal ran
+        ran = s
+        error = compare.error(s, st, starts)
+        if error is not None:
+            errors.append(error)
 
     try:
-        state = rollout.run(state, length, record, batch=copies)
+        state = rollout.run(state, length, record, batch=len(starts))
     except torch.linalg.LinAlgError as error:  # an SVD of NaN: the state is already lost
-        step = starts[0] + len(errors) + 1
+        step = starts[0] + ran + 1
         raise UnstableSimulation(
             f"the simulation became non-finite at step {step} ({str(error).splitlines()[0]})",
             step,
         ) from None
-    loss = torch.stack(errors).sum() * scale
+    # no observed step in the segment (Frames): the end state alone carries the gradient
+    loss = torch.stack(errors).sum() * compare.scale if errors else state.x.sum() * 0.0
     if not torch.isfinite(loss):
-        bad = _first_non_finite(positions, starts, length)
+        bad = compare.first_non_finite(starts, length)
         raise UnstableSimulation(f"the simulation became non-finite at step {bad}", bad)
     return loss, state
 
 
 class _SquaredError(torch.autograd.Function):
-    """The weighted squared error of a step's stacked positions ``x`` against the observed
-    frames ``rows`` (one per copy), keeping only references for the reverse: ``x`` is part of
-    the step's output, which the graph holds anyway, and the observed positions and weights
-    are the whole trajectory's, so a step's error costs the graph no memory of its own."""
+    """The squared error of a step's stacked positions ``x`` against the observed frames
+    ``rows`` (one per copy), keeping only references for the reverse: ``x`` is part of the
+    step's output, which the graph holds anyway, and the observed positions are the whole
+    trajectory's, so a step's error costs the graph no memory of its own."""
 
     @staticmethod
-    def forward(ctx, x, observed, weights, rows):
-        ctx.save_for_backward(x, observed, weights, rows)
+    def forward(ctx, x, observed, rows):
+        ctx.save_for_backward(x, observed, rows)
         difference = x - observed[rows].reshape(x.shape)
-        return (weights[rows].reshape(-1, 1) * difference * difference).sum()
+        return (difference * difference).sum()
 
     @staticmethod
     @once_differentiable
     def backward(ctx, grad):
-        x, observed, weights, rows = ctx.saved_tensors
+        x, observed, rows = ctx.saved_tensors
         difference = x - observed[rows].reshape(x.shape)
-        return 2 * grad * weights[rows].reshape(-1, 1) * difference, None, None, None
+        return 2 * grad * difference, None, None
 
 
-def _first_non_finite(positions: np.ndarray, starts: list[int], length: int) -> int:
-    """The earliest step whose recorded positions are not finite, over the given segments."""
-    bad = [
-        start + offset
-        for start in starts
-        for offset in range(1, length + 1)
-        if not np.isfinite(positions[start + offset]).all()
-    ]
-    return min(bad, default=starts[0] + length)
-
-
-def _checkpointed(rollout, observed, weights, starts, segment, scale, positions) -> RolloutResult:
+def _checkpointed(rollout, compare: _Comparison, starts, segment) -> RolloutResult:
     """No teacher forcing: keep segment starts, then backward last segment first."""
     checkpoints = []
     state = State.initial(rollout.scene, rollout.dtype)
@@ -353,20 +509,18 @@ def _checkpointed(rollout, observed, weights, starts, segment, scale, positions)
     with torch.no_grad():
         for start in starts:
             checkpoints.append(state)
-            loss, state = _segment(rollout, state, observed, weights, [start], segment, scale,
-                                   positions)  # fmt: skip
+            loss, state = _segment(rollout, state, compare, [start], segment)
             total += loss.item()
     carried: tuple[torch.Tensor, ...] | None = None
     for start, checkpoint in zip(reversed(starts), reversed(checkpoints), strict=True):
         leaf = checkpoint.detached(requires_grad=True)
-        loss, end = _segment(rollout, leaf, observed, weights, [start], segment, scale,
-                             positions)  # fmt: skip
+        loss, end = _segment(rollout, leaf, compare, [start], segment)
         if carried is not None:
             loss = loss + sum((t * g).sum() for t, g in zip(end.tensors(), carried, strict=True))
         loss.backward()
         carried = tuple(torch.zeros_like(t) if t.grad is None else t.grad for t in leaf.tensors())
         del loss, end  # this segment's graph, before the one before it runs
-    return RolloutResult(total, positions)
+    return RolloutResult(total, compare.positions)
 
 
 def _check_per_particle(law: nn.Module, F: torch.Tensor, name: str) -> None:

@@ -7,6 +7,8 @@ random subset of the particles), adds Gaussian noise, and writes the file that
     python scripts/make_observation.py obs.npz --material neohookean --param E=8e4
     python scripts/make_observation.py obs.npz --material sand --noise 0.01 --subset 0.5
     python scripts/make_observation.py obs.npz --material vonmises --scene paper --steps 300
+    python scripts/make_observation.py big.npz --material neohookean --scene paper \
+        --particles-per-side 30    # 27,000 particles on a 60^3 grid
 
 The hidden material goes beside the file as ``OUT.truth.json`` (family and parameters), where
 the ``observed`` task's report reads it; nothing shows it to a search.
@@ -15,7 +17,7 @@ Scenes: ``thrown`` is a 5^3-particle cube of side 0.2 thrown, spinning, into the
 a 16^3 grid (dt = 4e-4 s, 150 steps by default); ``gentle`` is the same cube tossed five times
 slower (400 steps by default), so that a soft body's strains stay small; ``paper`` is the SGA
 paper's scene (:func:`taichi_mpm.paper_scene`: 10^3 particles, 20^3 grid, dt = 5e-4 s, 1000
-steps).
+steps), refined by ``--particles-per-side n`` to n^3 particles on a (2n)^3 grid.
 """
 
 from __future__ import annotations
@@ -56,11 +58,11 @@ def thrown_scene(steps: int = 150, speed: float = 1.0):
     return tm.Scene(positions, velocities, volume, grid_resolution=16, dt=4e-4, steps=steps)
 
 
-def make_scene(name: str, steps: int):
+def make_scene(name: str, steps: int, particles_per_side: int | None = None):
     import taichi_mpm as tm
 
     if name == "paper":
-        return tm.paper_scene(steps=steps)
+        return tm.paper_scene(steps=steps, particles_per_side=particles_per_side or 10)
     return thrown_scene(steps, GENTLE if name == "gentle" else 1.0)
 
 
@@ -135,6 +137,12 @@ def _families_help() -> str:
     help="Scene.",
 )
 @click.option(
+    "--particles-per-side",
+    type=click.IntRange(min=2),
+    help="Particles along each side of the paper scene's cube (its grid refined alike) "
+    "[default: 10].",
+)
+@click.option(
     "--precision",
     type=click.Choice(("float32", "float64")),
     default="float64",
@@ -158,6 +166,7 @@ def main(
     subset: float,
     seed: int,
     scene_name: str,
+    particles_per_side: int | None,
     precision: str,
     arch: str,
 ) -> None:
@@ -178,13 +187,18 @@ def main(
     steps = DEFAULT_STEPS[scene_name] if steps is None else steps
     if frames > steps:
         raise click.BadParameter(f"{frames} exceeds --steps {steps}", param_hint="'--frames'")
+    if particles_per_side is not None and scene_name != "paper":
+        raise click.BadParameter(
+            f"refines the paper scene only; add --scene paper (got --scene {scene_name})",
+            param_hint="'--particles-per-side'",
+        )
     if out.suffix != ".npz":
         raise click.BadParameter(f"{out} must end in .npz", param_hint="'OUT'")
 
     import taichi_mpm as tm
     from taichi_mpm.sysid import observation_from_times, save_observation
 
-    scene = make_scene(scene_name, steps)
+    scene = make_scene(scene_name, steps, particles_per_side)
     frame_steps = observed_steps(steps, frames)
     rng = np.random.default_rng(seed)
 

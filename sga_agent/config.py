@@ -245,10 +245,12 @@ class FitConfig:
 @dataclass(frozen=True)
 class SandboxConfig:
     """Limits of one evaluation: wall clock ``timeout_s`` (seconds) and ``memory_mb`` (MiB),
-    as :class:`~sga_agent.sandbox.SandboxLimits` applies them."""
+    as :class:`~sga_agent.sandbox.SandboxLimits` applies them, and the ``device`` its fit
+    computes on (``cpu`` or ``cuda``, :mod:`sga_agent.task.device`)."""
 
     timeout_s: float = SandboxLimits.timeout_s
     memory_mb: int = SandboxLimits.memory_mb
+    device: str = SandboxLimits.device
 
     def __post_init__(self) -> None:
         try:
@@ -258,7 +260,8 @@ class SandboxConfig:
 
     def limits(self, threads: int) -> SandboxLimits:
         """The sandbox's limits, with ``threads`` for each fit's parallel loops."""
-        return SandboxLimits(timeout_s=self.timeout_s, memory_mb=self.memory_mb, threads=threads)
+        return SandboxLimits(timeout_s=self.timeout_s, memory_mb=self.memory_mb, threads=threads,
+                             device=self.device)  # fmt: skip
 
 
 @dataclass(frozen=True)

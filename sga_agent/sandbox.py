@@ -72,6 +72,8 @@ from typing import Any
 from sga_agent.helper_protocol import NOTE, FitSettings, note_of
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.task import STATUSES, Evaluation, EvaluationSettings, FitProgress
+from sga_agent.task.device import DEVICES
+from sga_agent.task.device import VARIABLE as DEVICE_VARIABLE
 
 #: Told each progress note of an evaluation (:class:`~sga_agent.task.FitProgress`).
 ProgressCallback = Callable[[FitProgress], None]
@@ -142,6 +144,9 @@ class SandboxLimits:
         to debug a task: candidate code then runs with the search's user and files.
     capture_timeout_s : float
         Wall-clock limit of the capture step alone (within ``timeout_s``).
+    device : str
+        Where the fit computes (:mod:`sga_agent.task.device`): ``cpu`` or ``cuda``, set in its
+        fit worker's environment when it starts.
     """
 
     timeout_s: float = 900.0
@@ -150,6 +155,7 @@ class SandboxLimits:
     threads: int = 1
     isolation: bool = True
     capture_timeout_s: float = 120.0
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         for name in ("timeout_s", "capture_timeout_s"):
@@ -166,6 +172,8 @@ class SandboxLimits:
                 raise ValueError(f"{name} must be at least {minimum}, got {value}")
         if not isinstance(self.isolation, bool):
             raise TypeError(f"isolation must be True or False, got {self.isolation!r}")
+        if self.device not in DEVICES:
+            raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
 
     @property
     def cpu_time_s(self) -> int:
@@ -1159,6 +1167,7 @@ def worker_environment(
     # Taichi's parallel loops take the thread budget, each launch only while the cores are free
     # (taichi_mpm.runtime.parallel_worthwhile)
     env["TI_CPU_MAX_NUM_THREADS"] = str(limits.threads)
+    env[DEVICE_VARIABLE] = limits.device
     env["TI_SKIP_VERSION_CHECK"] = "ON"  # else ti.init posts to taichi.graphics from a thread
     env["PYTHONUNBUFFERED"] = "1"  # the last lines before a crash reach the log
     env["PYTHONFAULTHANDLER"] = "1"  # a Python traceback for a fatal signal, in the log

@@ -207,7 +207,13 @@ def paper_scene(steps: int = 1000, particles_per_side: int = 10) -> Scene:
     A cube of side 0.5 centred in the unit domain, 10^3 particles, density 1e3, grid
     20^3 (dx = 0.05), dt = 5e-4, 1000 steps, gravity -9.8 along y, slip walls 3 cells
     thick, initial velocity (1.0, -0.5, -0.75) plus angular velocity (1, 3, 2).
+
+    ``particles_per_side`` n refines it: n^3 particles on a (2n)^3 grid, so that each cell
+    holds one particle as in the paper's scene (n = 10); the body, its motion, the time step
+    and the walls' thickness in cells stay.
     """
+    if particles_per_side < 2:
+        raise SceneError(f"particles_per_side={particles_per_side} must be >= 2")
     positions, volume = cube((0.5, 0.5, 0.5), 0.5, particles_per_side)
     velocities = rigid_velocity(positions, PAPER_LINEAR_VELOCITY, PAPER_ANGULAR_VELOCITY)
     return Scene(
@@ -215,7 +221,7 @@ def paper_scene(steps: int = 1000, particles_per_side: int = 10) -> Scene:
         velocities=velocities,
         particle_volume=volume,
         density=1e3,
-        grid_resolution=20,
+        grid_resolution=2 * particles_per_side,
         domain_size=1.0,
         dt=5e-4,
         steps=steps,

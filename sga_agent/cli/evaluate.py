@@ -18,13 +18,19 @@ from rich.text import Text
 
 from sga_agent import registry
 from sga_agent.cli import main
-from sga_agent.cli.options import task_options, task_or_factory, typed_task_options
+from sga_agent.cli.options import (
+    check_device_here,
+    task_options,
+    task_or_factory,
+    typed_task_options,
+)
 from sga_agent.cli.progress import PLAIN_GRACE_S, Count, PlainLines, clock, note_text
 from sga_agent.natural_units import natural_values_of
 from sga_agent.parsing import check_candidate, parse_response
 from sga_agent.reading import read_answer
 from sga_agent.sandbox import SandboxLimits, evaluate_in_sandbox, threads_per_worker
 from sga_agent.task import CodeRejected, Evaluation, EvaluationSettings, FitProgress, Task
+from sga_agent.task.device import DEVICES
 
 _DEFAULTS = SandboxLimits()
 #: Seconds between two plain lines of progress at most while the fit changes, and at least
@@ -95,6 +101,14 @@ def solution_in(text: str, task: Task) -> tuple[str | None, str, list[str]]:
     show_default=True,
     help="Memory limit in MiB of the capture and of the fit (Taichi alone takes about 1.2 GiB).",
 )
+@click.option(
+    "--device",
+    type=click.Choice(DEVICES),
+    default=_DEFAULTS.device,
+    show_default=True,
+    help="Where the fit computes: Taichi's kernels on this CPU or on a CUDA GPU (checked "
+    "before anything starts).",
+)
 def evaluate(
     task_name: str,
     file: Path,
@@ -104,6 +118,7 @@ def evaluate(
     as_json: bool,
     timeout_s: float,
     memory_mb: int,
+    device: str,
 ) -> None:
     """Score the solution in FILE for a task, exactly as the search does.
 
@@ -120,10 +135,12 @@ def evaluate(
         text = file.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise click.BadParameter(f"cannot read '{file}': {error}", param_hint="'FILE'") from error
+    check_device_here(device)
     extra_path = [Path.cwd()] if ":" in task_name else []
     task = _task(task_name, extra_path)
     typed = typed_task_options(task, options)
-    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb, threads=threads_per_worker(1))
+    limits = SandboxLimits(timeout_s=timeout_s, memory_mb=memory_mb, threads=threads_per_worker(1),
+                           device=device)  # fmt: skip
     settings = EvaluationSettings(epochs=epochs, learning_rate=learning_rate, options=typed)
     solution, problem, fixes = solution_in(text, task)
     for fix in fixes:

@@ -9,8 +9,10 @@ from typing import Any
 import click
 
 from sga_agent import registry, runner
+from sga_agent.cuda import DeviceUnavailable, check_device
 from sga_agent.options import OptionError
 from sga_agent.task import TaskBase
+from sga_agent.task.device import select_device
 
 _DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
 
@@ -105,3 +107,13 @@ class Price(click.ParamType):
                 param, ctx,
             )  # fmt: skip
         return prices
+
+
+def check_device_here(device: str) -> None:
+    """A device this machine cannot run is a usage error, before anything starts; the chosen
+    one is then this process's (its findings) as well as the fit workers'."""
+    try:
+        check_device(device)
+    except DeviceUnavailable as error:
+        raise click.UsageError(str(error)) from error
+    select_device(device)

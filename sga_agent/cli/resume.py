@@ -8,7 +8,7 @@ import click
 
 from sga_agent import registry
 from sga_agent.cli import main
-from sga_agent.cli.options import Duration
+from sga_agent.cli.options import Duration, check_device_here
 from sga_agent.cli.search import check_executor, execute, prepare
 from sga_agent.config import UNTIL_BUDGET, ConfigError, SearchConfig
 from sga_agent.events import RunResumed
@@ -16,6 +16,7 @@ from sga_agent.proposers.base import Proposer, ProposerError
 from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.run_store import RunFolderFull, RunLocked, RunStore, RunStoreError
 from sga_agent.search import slots_of
+from sga_agent.task.device import DEVICES
 
 
 @main.command()
@@ -32,9 +33,19 @@ from sga_agent.search import slots_of
     help="A new wall-time budget for the whole run, its earlier sessions included, e.g. 20m "
     "(recorded as the run's): to evaluate what a time budget stopped, or to search longer.",
 )
+@click.option(
+    "--device",
+    type=click.Choice(DEVICES),
+    help="Continue on this device instead of the run's own (a run of --device cuda on a "
+    "machine without a GPU, say).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print only the summary as JSON.")
 def resume(
-    run_dir: Path, ray_address: str | None, max_seconds: float | None, as_json: bool
+    run_dir: Path,
+    ray_address: str | None,
+    max_seconds: float | None,
+    device: str | None,
+    as_json: bool,
 ) -> None:
     """Continue the search recorded in RUN_DIR.
 
@@ -65,9 +76,12 @@ def resume(
             config = config.replace(ray_address=ray_address)
         if max_seconds is not None:
             config = config.replace(max_seconds=max_seconds)
+        if device is not None:
+            config = config.replace(device=device)
     except ConfigError as error:
         raise click.UsageError(str(error)) from error
     check_executor(config)
+    check_device_here(config.sandbox.device)
     task, proposer = prepare(config, loaded)
     if answers_wanted(config, store):
         check_model_answers(proposer, store)
@@ -78,7 +92,7 @@ def resume(
         click.echo(f"this run was stopped by its budget ({recorded.stopped}); a larger "
                    "--time-budget lets a time-stopped run go on", err=True)  # fmt: skip
     try:
-        if max_seconds is not None:
+        if max_seconds is not None or device is not None:
             store.update_config(config)
         store.append(RunResumed(ray_address, max_seconds))
         execute(config, store, as_json, proposer, task)

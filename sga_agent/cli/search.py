@@ -15,6 +15,7 @@ from sga_agent.cli.interrupt import INTERRUPTED, interrupts_stop_the_search
 from sga_agent.cli.options import (
     Duration,
     Price,
+    check_device_here,
     registered_task,
     task_options,
     typed_task_options,
@@ -34,6 +35,7 @@ from sga_agent.proposers.litellm_backbone import LiteLLMProposer
 from sga_agent.ray_executor import RAY_INSTALL, RayUnavailableError, import_ray
 from sga_agent.run_store import RunFolderFull, RunStore, RunStoreError
 from sga_agent.task import TaskBase, as_task, configured
+from sga_agent.task.device import DEVICES
 from sga_agent.wording import counted
 
 
@@ -146,6 +148,9 @@ def from_preset(name: str) -> str:
               show_default=True, help="Wall-clock limit of one evaluation (s).")
 @click.option("--memory-mb", type=click.IntRange(min=64), default=default("memory_mb"),
               show_default=True, help="Memory limit of one evaluation (MiB).")
+@click.option("--device", type=click.Choice(DEVICES), default=default("device"),
+              show_default=True, help="Where the fits compute: Taichi's kernels on this CPU or "
+              "on a CUDA GPU (checked before anything starts).")
 @click.option("--executor", type=click.Choice(EXECUTORS), default=default("executor"),
               show_default=True,
               help="Where candidates are evaluated: this machine's pool of sandboxed worker "
@@ -222,6 +227,7 @@ def search(
     except (ConfigError, RunStoreError) as error:
         raise click.UsageError(str(error)) from error
     check_executor(config)
+    check_device_here(config.sandbox.device)
     check_pricing(config)
     set_up, chosen = prepare(config, loaded)
     check_reachable(chosen)

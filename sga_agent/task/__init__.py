@@ -21,7 +21,8 @@ forge its score:
 Its modules: :mod:`.records` (settings, evaluations, prompt parts, assessments, parents),
 :mod:`.forms` (whether the data determine a solution's form: :class:`FormComparison`),
 :mod:`.protocol` (:class:`Task`, :class:`TaskBase`, :class:`BuiltinProposer`), :mod:`.code`
-(reading a solution's code without running it: :class:`CodeRejected`), :mod:`.progress` (the
+(reading a solution's code without running it: :class:`CodeRejected`), :mod:`.device` (the
+device evaluations compute on: :func:`selected_device`), :mod:`.progress` (the
 optional progress notes of a fit: :func:`report_progress`) and :mod:`.report` (the blocks a
 task's report sections are made of). A task package imports nothing else of
 ``sga_agent``, and this package imports nothing beyond the standard library, so that task
@@ -31,6 +32,7 @@ packages can import it cheaply.
 from __future__ import annotations
 
 from sga_agent.task.code import CodeRejected, Problem
+from sga_agent.task.device import selected_device
 from sga_agent.task.forms import FormComparison, Probe, compared, within_noise
 from sga_agent.task.memory import release_freed_memory
 from sga_agent.task.progress import FitProgress, progress_to, report_progress
@@ -76,6 +78,6 @@ __all__ = [
     "Image", "InvalidSolution", "NoOptions", "Parent", "Probe", "Problem", "PromptParts",
     "ReportView", "Section", "Simplified", "Table", "Task", "TaskBase", "TaskKind", "Text",
     "as_task", "compared", "configured", "has_hook", "is_out_of_memory", "options_type",
-    "progress_to", "release_freed_memory", "report_progress", "solution_with_parameters",
-    "within_noise",
+    "progress_to", "release_freed_memory", "report_progress", "selected_device",
+    "solution_with_parameters", "within_noise",
 ]  # fmt: skip

@@ -21,7 +21,13 @@ from bridges import laws as torch_laws
 from bridges import products
 from bridges.rollout import LawError, Rollout, trajectory_loss
 from bridges.step import torch_dtype
-from sga_agent.task import Evaluation, EvaluationSettings, is_out_of_memory, report_progress
+from sga_agent.task import (
+    Evaluation,
+    EvaluationSettings,
+    is_out_of_memory,
+    report_progress,
+    selected_device,
+)
 from taichi_mpm import runtime
 from tasks.constitutive import feedback, fidelity, law_kernel
 from tasks.constitutive.ground_truth import Trajectory, load_or_generate
@@ -39,14 +45,15 @@ from tasks.constitutive.specs import ELASTIC_TRUTH, KNOWN_ELASTIC, ConstitutiveS
 
 
 def ensure_runtime(precision: str) -> None:
-    """Start Taichi on the CPU unless it runs already (one precision per process), without
+    """Start Taichi on the process's device (:func:`~sga_agent.task.selected_device`: the
+    CPU unless ``--device cuda``) unless it runs already (one precision per process), without
     its "[Taichi] Starting on arch=x64" line: in the search's own process (the findings) that
     line would land on the progress bar."""
     try:
         runtime.current()
     except runtime.RuntimeNotInitialized:
         with contextlib.redirect_stdout(io.StringIO()):
-            tm.init(arch="cpu", precision=precision)
+            tm.init(arch=selected_device(), precision=precision)
 
 
 def check_precision(precision: str | None) -> None:

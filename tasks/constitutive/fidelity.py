@@ -28,7 +28,7 @@ def segments(observed: Trajectory, reset_every: int) -> int:
 
 def first_segments(observed: Trajectory, reset_every: int, fidelity: float) -> Trajectory:
     """The observation cut to its first ``ceil(fidelity * segments)`` segments (itself when
-    that is all of them): positions, reset states and weights alike."""
+    that is all of them): positions and reset states alike."""
     total = segments(observed, reset_every)
     kept = max(1, math.ceil(fidelity * total))
     if kept >= total:
@@ -39,5 +39,4 @@ def first_segments(observed: Trajectory, reset_every: int, fidelity: float) -> T
         positions=observed.positions[: end + 1],
         reset_steps=observed.reset_steps[:kept],
         states=None if states is None else {name: value[:kept] for name, value in states.items()},
-        weights=None if observed.weights is None else observed.weights[: end + 1],
     )

@@ -18,6 +18,7 @@ import taichi_mpm as tm
 from bridges.rollout import Rollout, UnstableSimulation
 from bridges.step import torch_dtype
 from sga_agent.task import CandidateRecord, FormComparison, compared, within_noise
+from taichi_mpm.frames import evenly_spaced
 from tasks.constitutive.evaluation import ensure_runtime, task_rollout
 from tasks.constitutive.free_sim import fitted_law
 from tasks.constitutive.law_graph import captured_graph
@@ -39,6 +40,9 @@ THRESHOLD = THRESHOLDS.reproduces
 #: The constitutive tasks' probe body: a cube of side 0.3 m, particles 0.05 m apart (216), as
 #: the paper's cube samples its body.
 CUBE_SIDE, CUBE_PER_SIDE = 0.3, 6
+#: The most positions (steps x particles) a probe's motion keeps of each law: every step of
+#: the probe cube, about 70 evenly spaced steps of an observed body of 2.7e4 particles.
+MOTION_POSITIONS = 2_000_000
 
 
 def cube_probes(base: tm.Scene, duration: float = DURATION) -> list[ProbeScene]:
@@ -108,9 +112,13 @@ def compare_task_forms(
 
 
 def _motion(rollout: Rollout) -> np.ndarray | None:
-    """Every step's positions, None when the run is unstable."""
+    """The positions of every step, or of evenly spaced steps where a large body's would hold
+    more than :data:`MOTION_POSITIONS`; None when the run is unstable."""
+    scene = rollout.scene
+    count = max(2, MOTION_POSITIONS // scene.num_particles)
+    kept = None if count > scene.steps else evenly_spaced(0, scene.steps, count)
     try:
-        positions = rollout.simulate()
+        positions = rollout.simulate(kept=kept)
     except (UnstableSimulation, torch.linalg.LinAlgError):
         return None
     return positions if np.isfinite(positions).all() else None

@@ -17,12 +17,16 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 import taichi_mpm as tm
 from sga_agent.task import report_progress
 from taichi_mpm import runtime
+
+if TYPE_CHECKING:
+    from bridges.rollout import Frames
 
 #: Bump when the simulator's results change, so old cache files are not reused.
 FORMAT_VERSION = 1
@@ -37,14 +41,12 @@ class Trajectory:
     """Observed positions (steps + 1, N, 3) and reset states, stacked, at ``reset_steps``.
 
     An observation without full states (``states`` None: no teacher forcing) may see only
-    some positions: ``weights`` (steps + 1, N) is 1 where a position was observed, else 0
-    (see :func:`bridges.rollout.trajectory_loss`); None means all of them.
+    some steps and particles: ``positions`` is then a :class:`bridges.rollout.Frames`.
     """
 
-    positions: np.ndarray
+    positions: np.ndarray | Frames
     reset_steps: np.ndarray
     states: dict[str, np.ndarray] | None
-    weights: np.ndarray | None = None
 
 
 def cache_dir() -> Path:

@@ -206,7 +206,7 @@ class _Fit:
                 batch = len(observed.states["x"])
             run = trajectory_loss(
                 self.rollout, observed.positions, observed.states, self.settings.reset_every,
-                backward=backward, batch=batch, weights=observed.weights,
+                backward=backward, batch=batch,
             )  # fmt: skip
         except UnstableSimulation as error:
             self.failure = f"epoch {epoch}: {error}"

@@ -1,5 +1,5 @@
-"""The observation as the ``observed`` task uses it: read once per file version, cut to the
-frames fitted, and laid out as the dense, weighted trajectory the rollout loss takes.
+"""The observation as the ``observed`` task uses it: read once per file version and cut to the
+frames fitted.
 
 Imports NumPy and taichi_mpm's observation reader only (no torch), so options and prompts
 stay cheap.
@@ -63,16 +63,6 @@ class ObservedData:
     @property
     def body_size(self) -> float:
         return self.observation.body_size
-
-    def dense(self) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (steps + 1, N, 3), zero where nothing was observed, and weights
-        (steps + 1, N), 1 at each observed frame and particle."""
-        shape = (self.scene.steps + 1, self.scene.num_particles)
-        positions, weights = np.zeros((*shape, 3)), np.zeros(shape)
-        rows, columns = self.frame_steps[:, None], self.particles[None, :]
-        positions[rows, columns] = self.positions
-        weights[rows, columns] = 1.0
-        return positions, weights
 
     def describe(self) -> dict[str, Any]:
         """Facts about the scene and the data for the prompt (no material in them)."""

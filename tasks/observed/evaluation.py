@@ -3,8 +3,10 @@
 Trusted, as :mod:`tasks.constitutive.evaluation`: the law is rebuilt from its checked graph and
 fitted with the constitutive tasks' inner optimization, here without teacher forcing (the
 observation has positions only): one rollout from the initial state per epoch, its loss the
-mean squared error over the observed frames and particles, the gradient carried back across
-checkpointed segments of ``segment`` steps. The hidden truth beside the observation file is
+mean squared error over the observed frames and particles (:class:`bridges.rollout.Frames`:
+nothing is held for the steps between frames), the gradient carried back across checkpointed
+segments of at most ``segment`` steps, as long as ``graph_memory_mb`` allows for the law at
+hand (:func:`bridges.rollout.checkpoint_segment`). The hidden truth beside the observation file is
 read by :func:`assess` alone, for reports (and recorded when a run starts, see
 :func:`tasks.observed.data.provenance`).
 """
@@ -21,7 +23,14 @@ import numpy as np
 import torch
 
 from bridges import laws as torch_laws
-from bridges.rollout import Rollout, UnstableSimulation, trajectory_loss
+from bridges.rollout import (
+    Frames,
+    GraphBudgetError,
+    Rollout,
+    UnstableSimulation,
+    checkpoint_segment,
+    trajectory_loss,
+)
 from bridges.step import torch_dtype
 from sga_agent.task import (
     Assessment,
@@ -55,6 +64,10 @@ from tasks.observed.data import ObservedData, provenance
 from tasks.observed.options import ObservedOptions
 
 EPOCHS, LEARNING_RATE = 30, 3e-2  # the constitutive tasks' inner defaults
+#: What a fit's memory grows by per byte of graph and checkpoints counted: the C allocator
+#: leaves holes between the tensors a segment keeps (1.2x to 1.8x of the count, measured at
+#: 2.7e4 particles for three laws; see docs/benchmarks.md, "Scale").
+ALLOCATOR_SLACK = 2.0
 #: The verdict when an observed file has changed since the run started.
 STALE = ("not judged: the observation (or validation) file has changed since the run started, "
          "so nothing was simulated against it")  # fmt: skip
@@ -75,10 +88,31 @@ def rollout_for(
     return Rollout(scene, law, known_elastic(options, dtype))
 
 
+def frames(data: ObservedData) -> Frames:
+    """The observed frames and particles, as a rollout's loss compares them."""
+    return Frames(data.frame_steps, data.positions, data.particles)
+
+
 def trajectory(data: ObservedData) -> Trajectory:
-    """The observation as the inner optimization takes it: no reset states, weighted."""
-    positions, weights = data.dense()
-    return Trajectory(positions, np.zeros(0, dtype=np.int64), None, weights)
+    """The observation as the inner optimization takes it: its frames, no reset states."""
+    return Trajectory(frames(data), np.zeros(0, dtype=np.int64), None)
+
+
+def gradient_segment(rollout: Rollout, options: ObservedOptions) -> int:
+    """The checkpointed segment length of a fit of ``rollout`` (its law's graph measured):
+    at most ``options.segment`` steps, within ``options.graph_memory_mb``.
+
+    Raises :class:`~bridges.rollout.GraphBudgetError` naming the options that would let it
+    fit."""
+    budget = int(options.graph_memory_mb * 2**20)
+    try:
+        return checkpoint_segment(rollout, rollout.scene.steps, budget, options.segment,
+                                  ALLOCATOR_SLACK)[0]  # fmt: skip
+    except GraphBudgetError as error:
+        raise GraphBudgetError(
+            f"{error}: raise it with --option graph_memory_mb=MiB (the fit worker's memory "
+            "limit bounds it, --memory-mb), or fit fewer frames with --option frames=N"
+        ) from None
 
 
 def setup(options: ObservedOptions) -> tuple[ObservedData, torch.dtype]:
@@ -95,9 +129,8 @@ def warm_up(options: ObservedOptions) -> Iterator[None]:
     data, dtype = setup(options)
     elastic = torch_laws.StVKHencky(E=5e4, nu=0.3, dtype=dtype).requires_grad_(False)
     plastic = torch_laws.VonMises(yield_stress=1e3, E=5e4, nu=0.3, dtype=dtype)
-    positions, weights = data.dense()
-    trajectory_loss(Rollout(data.scene, plastic, elastic), positions[:3], None, 1,
-                    weights=np.ones_like(weights[:3]))  # fmt: skip
+    start = np.repeat(data.scene.positions[None], 2, axis=0)  # any positions will do
+    trajectory_loss(Rollout(data.scene, plastic, elastic), Frames(np.array([1, 2]), start), None, 1)
     yield
     warm_up_fitting(dtype, options.optimizer or "adam")
 
@@ -119,10 +152,17 @@ def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
     except LawGraphError as error:
         return Evaluation.invalid(str(error), seconds=time.perf_counter() - started)
     rollout = rollout_for(law, observed.scene, options, dtype)
+    try:
+        segment = gradient_segment(rollout, options)
+    except GraphBudgetError as error:
+        return Evaluation.invalid(str(error), status="out_of_memory",
+                                  seconds=time.perf_counter() - started)  # fmt: skip
+    except Exception:  # the law fails on its own: the fit below reports how
+        segment = options.segment
     inner = InnerSettings(
         epochs=EPOCHS if settings.epochs is None else settings.epochs,
         learning_rate=settings.learning_rate or LEARNING_RATE,
-        reset_every=options.segment,
+        reset_every=segment,
         optimizer=options.optimizer or "adam",
     )
     result = fit(rollout, law, trajectory(observed), inner, started)
@@ -134,20 +174,19 @@ def evaluate(data: Any, settings: EvaluationSettings) -> Evaluation:
 
 
 def trajectory_text(predicted: np.ndarray, data: ObservedData) -> str:
-    """Four observed particles at the corners of the body, simulated next to observed, at up
-    to ten of the observed frames: the rows that disagree most (see
-    :func:`~tasks.constitutive.feedback.position_table`)."""
+    """Four observed particles at the corners of the body, simulated (``predicted``: at the
+    observed frames and particles) next to observed, at up to ten of the observed frames: the
+    rows that disagree most (see :func:`~tasks.constitutive.feedback.position_table`)."""
     start = data.scene.positions[data.particles]
     picks = evenly_spaced(0, len(data.frame_steps) - 1, feedback.TRAJECTORY_FRAMES)
     columns = list(dict.fromkeys(feedback.corner_particles(start)))
     steps = [int(data.frame_steps[pick]) for pick in picks]
-    particles = [data.particles[column] for column in columns]
     return feedback.position_table(
         "Trajectories of observed particles near the body's corners (x, y, z in m; y points "
         "up), simulated vs observed",
         start[columns],
         [step * data.scene.dt for step in steps],
-        predicted[np.ix_(steps, particles)].swapaxes(0, 1),
+        predicted[np.ix_(picks, columns)].swapaxes(0, 1),
         data.positions[np.ix_(picks, columns)].swapaxes(0, 1),
     )
 
@@ -180,9 +219,9 @@ def assess(
         material = material_family(truth["family"], **truth["parameters"])
         plastic, elastic = torch_laws.from_material(material, dtype)
         rollout = Rollout(data.scene, plastic.requires_grad_(False), elastic.requires_grad_(False))
-        observed = trajectory(data)
-        found.truth_loss = trajectory_loss(rollout, observed.positions, None, options.segment,
-                                           backward=False, weights=observed.weights).loss
+        found.truth_loss = trajectory_loss(
+            rollout, frames(data), None, options.segment, backward=False
+        ).loss
     graph = captured_graph(artifacts)
     if graph is None:
         return found
@@ -211,10 +250,10 @@ def free_run(
     size, steps = data.body_size, data.scene.steps
     rollout = rollout_for(law, data.scene, options, dtype)
     try:
-        simulated = rollout.simulate()
+        simulated = rollout.simulate(kept=data.frame_steps)
     except (UnstableSimulation, torch.linalg.LinAlgError) as error:
         return FreeRun(math.inf, math.inf, size, steps, unstable=str(error).splitlines()[0])
-    simulated = simulated[data.frame_steps][:, data.particles]
+    simulated = simulated[:, data.particles]
     if not np.isfinite(simulated).all():
         return FreeRun(math.inf, math.inf, size, steps, unstable="non-finite positions")
     errors = np.sqrt(((simulated - data.positions) ** 2).sum(axis=-1).mean(axis=-1)) / size
@@ -249,11 +288,10 @@ def simplified(candidate: CandidateRecord, options: ObservedOptions) -> Simplifi
     if graph is None:
         return None
     data, dtype = setup(options)
-    observed = trajectory(data)
+    observed = frames(data)
 
     def loss_of(parameters: dict[str, float]) -> float:
         rollout = rollout_for(fitted_law(graph, parameters, dtype), data.scene, options, dtype)
-        return trajectory_loss(rollout, observed.positions, None, options.segment,
-                               backward=False, weights=observed.weights).loss  # fmt: skip
+        return trajectory_loss(rollout, observed, None, options.segment, backward=False).loss
 
     return simplify(candidate.code, options.searched, candidate.parameters, loss_of)

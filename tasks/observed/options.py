@@ -21,7 +21,10 @@ class ObservedOptions:
     ``searched``: ``elastic`` (F to Kirchhoff stress) or ``plastic`` (the return mapping, the
     elastic law then known: family ``elastic`` with Young's modulus ``E`` (Pa) and Poisson's
     ratio ``nu``). ``frames``: fit only the first this many observed frames after t = 0
-    (default all). ``segment``: steps per checkpointed segment of the backward pass.
+    (default all). ``segment``: the most steps per checkpointed segment of the backward pass;
+    ``graph_memory_mb``: what the gradient may hold at once (a segment's autograd graph and
+    the state at each segment's start, in MiB): segments are shortened to fit it, measured on
+    each law, and a law that cannot fit it is reported with the options to change.
     ``optimizer`` and ``precision`` as in the constitutive tasks. ``validation``: a second
     observation (``.npz``) of the same material in another scene, never fitted: the best law's
     free run there is its held-out error; checked here too (readable, not the observation
@@ -34,6 +37,7 @@ class ObservedOptions:
     nu: float | None = None
     frames: int | None = None
     segment: int = 50
+    graph_memory_mb: float = 500.0
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     validation: str | None = None
@@ -58,6 +62,9 @@ class ObservedOptions:
                              f"frames after t = 0), got {self.frames}")  # fmt: skip
         if self.segment < 1:
             raise ValueError(f"option 'segment' must be at least 1, got {self.segment}")
+        if not self.graph_memory_mb > 0:
+            raise ValueError("option 'graph_memory_mb' must be a positive number of MiB, got "
+                             f"{self.graph_memory_mb}")  # fmt: skip
         self._check_elastic()
         if self.validation is not None:
             object.__setattr__(self, "validation", self._checked_validation(observation))

@@ -43,8 +43,7 @@ def scene_text(data: ObservedData, options: ObservedOptions) -> str:
         "to observed states, so an error early in the motion carries on. A proposal is scored "
         "by the mean squared distance (m^2) between simulated and observed positions over the "
         "observed moments and points, after its continuous parameters have been fitted by "
-        "gradient descent through the whole simulation (the gradient carried back across "
-        f"checkpoints every {options.segment} steps)."
+        "gradient descent through the whole simulation."
     )
 
 

@@ -11,7 +11,7 @@ import torch
 
 import taichi_mpm as tm
 from bridges.laws import from_material, parameter_gradients
-from bridges.rollout import Rollout, State, trajectory_loss
+from bridges.rollout import Frames, Rollout, State, trajectory_loss
 from tests.taichi_mpm.helpers import impact_scene
 
 STEPS = 80
@@ -97,6 +97,36 @@ def test_segments_and_teacher_forcing_are_consistent():
         assert b[key] == pytest.approx(a[key], rel=1e-10)
         # teacher forcing cuts the gradient path across the reset: only the loss agrees
     assert c["yield_stress"] != pytest.approx(a["yield_stress"], rel=1e-3, abs=0)
+
+
+def test_frames_of_some_steps_and_particles_equal_taichi_mpm():
+    """A loss on a few frames of a third of the particles (:class:`Frames`, checkpointed
+    segments that hold no frame among them) has taichi_mpm's loss and material gradients for
+    the same positions weighted alike, and the simulated positions at those frames."""
+    material = MATERIALS["von_mises"]
+    scene = impact_scene(steps=STEPS)
+    steps, particles = np.array([7, 30, 55, STEPS]), np.arange(0, scene.num_particles, 3)
+    observed = _observed(scene)[np.ix_(steps, particles)]
+    sim = tm.Simulator(scene, material)
+    positions = sim.forward()
+    plastic, elastic = from_material(material, dtype=torch.float64)
+    result = trajectory_loss(Rollout(scene, plastic, elastic), Frames(steps, observed, particles),
+                             segment=20)  # fmt: skip
+
+    simulated = positions[np.ix_(steps, particles)]
+    scale = np.abs(positions - positions[0]).max()
+    assert result.positions.shape == observed.shape
+    assert np.abs(result.positions - simulated).max() < 1e-5 * scale
+    factor = 1.0 / observed.size
+    assert result.loss == pytest.approx(((simulated - observed) ** 2).sum() * factor, rel=1e-8)
+    seed = np.zeros_like(positions)
+    seed[np.ix_(steps, particles)] = 2.0 * (simulated - observed) * factor
+    expected = sim.backward(seed).material
+    got = parameter_gradients(plastic, elastic)
+    for parameter, value in expected.items():
+        assert got[parameter] == pytest.approx(value, rel=1e-4, abs=1e-12 * abs(value) + 1e-30), (
+            parameter
+        )
 
 
 def test_step_gradients_match_finite_differences():

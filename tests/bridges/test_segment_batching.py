@@ -174,17 +174,16 @@ def test_a_group_of_segments_is_freed_before_the_next_one_runs():
 
 
 def test_squared_error_gradient_matches_finite_differences():
-    """The step's loss term differentiates its positions exactly (weights and observed frames
-    of each copy from its own row)."""
+    """The step's loss term differentiates its positions exactly (the observed frame of each
+    copy from its own row)."""
     generator = torch.Generator().manual_seed(3)
     observed = torch.randn(6, 4, 3, generator=generator, dtype=torch.float64)
-    weights = (torch.rand(6, 4, generator=generator, dtype=torch.float64) > 0.3).double()
     x = torch.randn(8, 3, generator=generator, dtype=torch.float64, requires_grad=True)
     rows = torch.tensor([1, 4])  # two copies of a 4-particle scene
 
     def error(x):
-        return _SquaredError.apply(x, observed, weights, rows)
+        return _SquaredError.apply(x, observed, rows)
 
     assert torch.autograd.gradcheck(error, (x,))
-    expected = (weights[rows].reshape(-1, 1) * (x - observed[rows].reshape(8, 3)) ** 2).sum()
+    expected = ((x - observed[rows].reshape(8, 3)) ** 2).sum()
     assert error(x).item() == pytest.approx(expected.item(), rel=1e-14)

@@ -15,13 +15,12 @@ from tasks.constitutive.options import ConstitutiveOptions
 LAWS = Path(__file__).resolve().parents[3] / "examples" / "laws"
 
 
-def trajectory(steps: int, reset_every: int, weights: bool = False) -> Trajectory:
+def trajectory(steps: int, reset_every: int) -> Trajectory:
     resets = np.arange(0, steps, reset_every)
     return Trajectory(
         positions=np.arange(steps + 1, dtype=float)[:, None, None] * np.ones((1, 4, 3)),
         reset_steps=resets,
         states={"x": resets[:, None, None] * np.ones((1, 4, 3)), "F": np.ones((len(resets), 4))},
-        weights=np.ones((steps + 1, 4)) if weights else None,
     )
 
 
@@ -33,10 +32,10 @@ def test_the_screen_runs_that_share_of_the_epochs_at_least_one(epochs, fidelity,
 
 
 def test_the_screen_keeps_the_first_segments_of_every_array():
-    whole = trajectory(1000, 100, weights=True)
+    whole = trajectory(1000, 100)
     cut = first_segments(whole, 100, 0.2)
     assert segments(whole, 100) == 10 and segments(cut, 100) == 2
-    assert cut.positions.shape == (201, 4, 3) and cut.weights.shape == (201, 4)
+    assert cut.positions.shape == (201, 4, 3)
     assert list(cut.reset_steps) == [0, 100]
     assert {name: len(value) for name, value in cut.states.items()} == {"x": 2, "F": 2}
     np.testing.assert_array_equal(cut.positions, whole.positions[:201])

@@ -18,14 +18,13 @@ FRAMES, PARTICLES = 6, 8
 
 
 def observed(tmp_path: Path) -> tuple[ObservedData, np.ndarray]:
-    """The observation and positions (steps + 1, N, 3) that reproduce it exactly."""
+    """The observation and simulated positions at its frames and particles (frames, P, 3), as
+    a fit against its :class:`~bridges.rollout.Frames` records them, that reproduce it."""
     arrays = observation_arrays(frames=FRAMES, particles=PARTICLES)
     arrays["positions"] = arrays["positions"] + 0.01 * np.arange(FRAMES)[:, None, None]
     np.savez(tmp_path / "observed.npz", **arrays)
     data = ObservedData.load(tmp_path / "observed.npz")
-    predicted = np.zeros((data.scene.steps + 1, len(arrays["initial_positions"]), 3))
-    predicted[np.ix_(data.frame_steps, data.particles)] = data.positions
-    return data, predicted
+    return data, data.positions.copy()
 
 
 def test_a_reproduced_observation_gets_one_line(tmp_path):
@@ -38,7 +37,7 @@ def test_a_reproduced_observation_gets_one_line(tmp_path):
 
 def test_a_poor_fit_lists_its_worst_rows(tmp_path):
     data, predicted = observed(tmp_path)
-    predicted[data.frame_steps[-1]] += 0.003  # every particle 5.2 mm off at the last frame
+    predicted[-1] += 0.003  # every particle 5.2 mm off at the last frame
     lines = trajectory_text(predicted, data).splitlines()
     rows = [line for line in lines if line.startswith("  t = ")]
     assert rows and len(rows) <= TRAJECTORY_ROWS

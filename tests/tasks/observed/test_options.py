@@ -66,17 +66,20 @@ def test_a_missing_file_and_missing_options_are_usage_errors(registered, tmp_pat
     assert family.exit_code == 2 and "stvk" in family.output
     frames = search(registered, tmp_path, good, *PLASTIC, "--option", "frames=9")
     assert frames.exit_code == 2 and "option 'frames' must lie in [2, 4]" in frames.output
+    budget = search(registered, tmp_path, good, *PLASTIC, "--option", "graph_memory_mb=0")
+    assert budget.exit_code == 2 and "option 'graph_memory_mb' must be a positive" in budget.output
 
 
 def test_options_are_typed_with_the_path_made_absolute(tmp_path: Path, monkeypatch) -> None:
     write(tmp_path / "obs.npz")
     monkeypatch.chdir(tmp_path)
     raw = {"observation": "obs.npz", "searched": "plastic", "E": "5e4", "nu": "0.3",
-           "segment": "20"}  # fmt: skip
+           "segment": "20", "graph_memory_mb": "64"}  # fmt: skip
     options = parse_options(ObservedTask.options_type, raw, "observed")
     assert isinstance(options, ObservedOptions)
     assert options.observation == str(tmp_path / "obs.npz")
     assert options.E == 5e4 and options.segment == 20 and options.elastic == "stvk"
+    assert options.graph_memory_mb == 64
 
 
 def test_the_prompt_describes_the_data_and_no_truth(tmp_path: Path) -> None:
