@@ -18,10 +18,12 @@ row: seconds per particle-step (an epoch's, or the pass's), the resident memory 
 measurement added at its peak (the peak is reset after the kernels compile and the data load,
 so compiling does not count), the state's size (x, v, C, F of every particle) and, for an
 evaluation, the checkpointed segment it ran. Writes ``scale.json`` and ``scale.png`` into
-``--out``. Usage::
+``--out`` (the plot with the rows of an earlier run's ``scale.json`` too, ``--plot-with``: a
+larger size run with another budget, say). Usage::
 
     python benchmarks/scale.py [--sides 10 20 30 40] [--steps 1000] [--epochs 1]
-        [--graph-memory-mb 500] [--device cpu] [--out benchmarks/results/scale]
+        [--graph-memory-mb 1000] [--device cpu] [--out benchmarks/results/scale]
+        [--plot-with OTHER/scale.json]
 """
 
 from __future__ import annotations
@@ -199,11 +201,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--epochs", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=2, help="of the simulator's passes")
-    parser.add_argument("--graph-memory-mb", type=float, default=500.0)
+    parser.add_argument("--graph-memory-mb", type=float, default=1000.0)
     parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                         help="Taichi's arch (torch laws stay on the CPU)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--out", type=Path, default=REPOSITORY / "benchmarks/results/scale")
+    parser.add_argument("--plot-with", type=Path, help="an earlier run's scale.json")
     args = parser.parse_args()
     started = time.perf_counter()
     load = os.getloadavg()[0]
@@ -218,7 +221,8 @@ def main() -> None:
             print(describe(row), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "scale.json").write_text(json.dumps(rows, indent=1) + "\n")
-    plot(args.out / "scale.png", rows)
+    earlier = json.loads(args.plot_with.read_text()) if args.plot_with else []
+    plot(args.out / "scale.png", sorted(earlier + rows, key=lambda row: row["particles"]))
     print(f"load {load:.2f} before, {os.getloadavg()[0]:.2f} after; "
           f"{time.perf_counter() - started:.0f} s; wrote {args.out / 'scale.json'} and "
           f"{args.out / 'scale.png'}")  # fmt: skip

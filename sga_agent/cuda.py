@@ -43,4 +43,5 @@ def _taichi_cuda_problem() -> str:
 
     if taichi._lib.core.with_cuda():
         return ""
-    return f"Taichi {taichi.__version__} was built without CUDA"
+    version = ".".join(map(str, taichi.__version__))
+    return f"Taichi {version} was built without CUDA"

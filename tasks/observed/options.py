@@ -37,7 +37,7 @@ class ObservedOptions:
     nu: float | None = None
     frames: int | None = None
     segment: int = 50
-    graph_memory_mb: float = 500.0
+    graph_memory_mb: float = 1000.0
     optimizer: Literal["adam", "lbfgs"] | None = None
     precision: Literal["float32", "float64"] | None = None
     validation: str | None = None
