@@ -91,3 +91,16 @@ def test_a_process_starts_taichi_on_its_selected_device(monkeypatch) -> None:
         done = subprocess.run([sys.executable, "-c", code], env=env, cwd=REPOSITORY,
                               capture_output=True, text=True, check=True)  # fmt: skip
         assert done.stdout.split()[-1] == chosen  # asked of Taichi (it falls back without CUDA)
+
+
+def test_resume_on_cuda_without_it_is_a_usage_error_and_changes_nothing(tmp_path: Path) -> None:
+    _no_cuda_here()
+    from sga_agent.run_store import RunStore
+
+    config = SearchConfig.from_preset("quick", task="elastic", proposer="builtin")
+    store = RunStore.create(tmp_path, config, {"proposer": "builtin"})
+    before = (store.path / "config.json").read_text()
+    result = CliRunner().invoke(main, ["resume", str(store.path), "--device", "cuda"])
+    assert result.exit_code == 2, result.output
+    assert "--device cuda cannot run here" in result.output
+    assert (store.path / "config.json").read_text() == before

@@ -127,6 +127,22 @@ def test_sysid_file_that_is_not_an_observation(tmp_path):
     assert "is not a NumPy .npz archive" in result.output
 
 
+@pytest.mark.slow
+def test_make_observation_refines_the_paper_scene(tmp_path):
+    path = tmp_path / "fine.npz"
+    args = ["--material", "neohookean", "--scene", "paper", "--particles-per-side", "12",
+            "--steps", "20", "--frames", "2"]  # fmt: skip
+    done = make_observation(path, *args)
+    assert done.returncode == 0, done.stderr
+    assert "1728 particles, grid 24^3" in done.stdout
+    scene = load_observation(path).scene
+    coarse = tm.paper_scene(steps=20)
+    assert scene.num_particles == 12**3 and scene.grid_resolution == 24
+    assert scene.dt == coarse.dt and scene.walls == coarse.walls
+    assert np.ptp(scene.positions, axis=0).max() == pytest.approx(0.5 * 11 / 12)
+    assert scene.particle_volume * 12**3 == pytest.approx(coarse.particle_volume * 10**3)
+
+
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
@@ -182,6 +198,7 @@ def test_make_observation_subset_and_noise(tmp_path):
         (["--material", "sand", "--param", "yield_stress=1e3"], "friction_angle"),
         (["--material", "sand", "--param", "E"], "NAME=VALUE"),
         (["--material", "sand", "--subset", "0"], "--subset"),
+        (["--material", "sand", "--particles-per-side", "20"], "add --scene paper"),
     ],
 )
 def test_make_observation_rejects_bad_arguments(tmp_path, args, fragment):
