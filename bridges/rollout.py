@@ -187,6 +187,10 @@ class Rollout:
         state = state or State.initial(self.scene, self.dtype)
         steps = self.scene.steps if steps is None else steps
         wanted = None if kept is None else {int(step) for step in kept}
+        if wanted is not None and (
+            len(wanted) != len(kept) or not all(0 <= step <= steps for step in wanted)
+        ):
+            raise ValueError(f"kept steps must lie in [0, {steps}] and be distinct")
         positions = [state.x.numpy().copy()] if wanted is None or 0 in wanted else []
 
         def record(step: int, now: State) -> None:
@@ -195,8 +199,6 @@ class Rollout:
 
         with torch.no_grad():
             self.run(state, steps, record)
-        if wanted is not None and len(positions) != len(wanted):
-            raise ValueError(f"kept steps must lie in [0, {steps}] and be distinct")
         return np.stack(positions)
 
 
@@ -443,8 +445,7 @@ class _SparseComparison(_Comparison):
             return None
         x = state.x if self.particles is None else state.x[self.particles]
         self.positions[row] = x.detach().numpy()
-        difference = x - self.observed[row]
-        return (difference * difference).sum()
+        return _SquaredError.apply(x, self.observed, torch.tensor([row]))
 
     def first_non_finite(self, starts: list[int], length: int) -> int:
         return starts[0] + length if self.non_finite is None else self.non_finite

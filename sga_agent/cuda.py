@@ -5,7 +5,7 @@ choice)."""
 
 from __future__ import annotations
 
-from sga_agent.task.device import DEVICES
+from sga_agent.task.device import check_device_name
 
 
 class DeviceUnavailable(ValueError):
@@ -14,9 +14,8 @@ class DeviceUnavailable(ValueError):
 
 def check_device(device: str) -> None:
     """Raise :class:`DeviceUnavailable` unless ``device`` can run on this machine (``cpu``
-    always can); a name outside :data:`DEVICES` is a ``ValueError``."""
-    if device not in DEVICES:
-        raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+    always can); a name outside :data:`~sga_agent.task.device.DEVICES` is a ``ValueError``."""
+    check_device_name(device)
     if device == "cpu":
         return
     missing = [problem for problem in (_torch_cuda_problem(), _taichi_cuda_problem()) if problem]

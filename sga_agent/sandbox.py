@@ -72,8 +72,8 @@ from typing import Any
 from sga_agent.helper_protocol import NOTE, FitSettings, note_of
 from sga_agent.isolation import Isolation, detect_isolation
 from sga_agent.task import STATUSES, Evaluation, EvaluationSettings, FitProgress
-from sga_agent.task.device import DEVICES
 from sga_agent.task.device import VARIABLE as DEVICE_VARIABLE
+from sga_agent.task.device import check_device_name
 
 #: Told each progress note of an evaluation (:class:`~sga_agent.task.FitProgress`).
 ProgressCallback = Callable[[FitProgress], None]
@@ -172,8 +172,7 @@ class SandboxLimits:
                 raise ValueError(f"{name} must be at least {minimum}, got {value}")
         if not isinstance(self.isolation, bool):
             raise TypeError(f"isolation must be True or False, got {self.isolation!r}")
-        if self.device not in DEVICES:
-            raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
+        check_device_name(self.device)
 
     @property
     def cpu_time_s(self) -> int:

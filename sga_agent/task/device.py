@@ -20,10 +20,15 @@ DEVICES = ("cpu", "cuda")
 VARIABLE = "SGA_DEVICE"
 
 
-def select_device(device: str) -> None:
-    """Make ``device`` this process's choice (read by :func:`selected_device`)."""
+def check_device_name(device: str) -> None:
+    """A ``ValueError`` unless ``device`` is one of :data:`DEVICES`."""
     if device not in DEVICES:
         raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+
+
+def select_device(device: str) -> None:
+    """Make ``device`` this process's choice (read by :func:`selected_device`)."""
+    check_device_name(device)
     os.environ[VARIABLE] = device
 
 

@@ -21,7 +21,7 @@ def _vector(values: np.ndarray) -> str:
     return "(" + ", ".join(f"{value:.3g}" for value in values) + ")"
 
 
-def scene_text(data: ObservedData, options: ObservedOptions) -> str:
+def scene_text(data: ObservedData) -> str:
     """The scene, the observed data and how a proposal is scored."""
     facts = data.describe()
     times = facts["times"]
@@ -49,7 +49,7 @@ def scene_text(data: ObservedData, options: ObservedOptions) -> str:
 
 def prompt_parts(data: ObservedData, options: ObservedOptions) -> PromptParts:
     """Role, context, template and rules for the searched part of the law."""
-    scene = scene_text(data, options)
+    scene = scene_text(data)
     if options.searched == "elastic":
         return PromptParts(
             role=prompt_text.ROLE,
