@@ -17,7 +17,9 @@ of every step, the graph held within ``--graph-memory-mb``, the task's option). 
 row: seconds per particle-step (an epoch's, or the pass's), the resident memory the
 measurement added at its peak (the peak is reset after the kernels compile and the data load,
 so compiling does not count), the state's size (x, v, C, F of every particle) and, for an
-evaluation, the checkpointed segment it ran. Writes ``scale.json`` and ``scale.png`` into
+evaluation, the checkpointed segment it ran and what its graph and checkpoints count (the
+growth beyond the count is the allocator's, :data:`tasks.observed.evaluation.ALLOCATOR_SLACK`).
+Writes ``scale.json`` and ``scale.png`` into
 ``--out`` (the plot with the rows of an earlier run's ``scale.json`` too, ``--plot-with``: a
 larger size run with another budget, say). Usage::
 
@@ -142,12 +144,14 @@ def _measure_evaluation(scene, config: dict) -> dict:
         return {"refused": found.reason, "added_mb": added}
     epochs = found.extras["epoch_seconds"]
     return {"epoch_us": sum(epochs) / len(epochs) / (scene.num_particles * scene.steps) * 1e6,
-            "added_mb": added, "loss": found.loss, "segment": _segment(options, graph),
+            "added_mb": added, "loss": found.loss, **_segment(options, graph),
             "budget_mb": config["graph_memory_mb"]}  # fmt: skip
 
 
-def _segment(options, graph) -> int:
-    """The checkpointed segment the evaluation ran (planned again, as it plans it)."""
+def _segment(options, graph) -> dict:
+    """The checkpointed segment the evaluation ran (planned again, as it plans it) and what
+    its graph and checkpoints count, MB (without the allocator's slack)."""
+    from bridges.rollout import checkpoint_segment
     from bridges.step import torch_dtype
     from tasks.constitutive.law_graph import build_law
     from tasks.observed.data import ObservedData
@@ -155,7 +159,10 @@ def _segment(options, graph) -> int:
 
     data = ObservedData.load(options.observation)
     law = build_law(graph, torch_dtype())
-    return gradient_segment(rollout_for(law, data.scene, options, torch_dtype()), options)
+    rollout = rollout_for(law, data.scene, options, torch_dtype())
+    segment = gradient_segment(rollout, options)
+    counted = checkpoint_segment(rollout, data.scene.steps, 2**62, segment)[1]
+    return {"segment": segment, "counted_mb": counted / 2**20}
 
 
 def run(config: dict) -> dict:
@@ -236,8 +243,10 @@ def describe(row: dict) -> str:
                        f"{row['forward_backward_us']:.3f} µs a particle-step") + tail  # fmt: skip
     if "refused" in row:
         return head + f"refused: {row['refused']}" + tail
+    counted = (f" (graph and checkpoints counted {row['counted_mb']:.0f} MB: added "
+               f"{row['added_mb'] / row['counted_mb']:.2f}x that)" if "counted_mb" in row else "")
     return head + (f"an epoch {row['epoch_us']:.3f} µs a particle-step, segments of "
-                   f"{row['segment']} steps within {row['budget_mb']:g} MB, loss "
+                   f"{row['segment']} steps{counted} within {row['budget_mb']:g} MB, loss "
                    f"{row['loss']:.3g}") + tail  # fmt: skip
 
 
