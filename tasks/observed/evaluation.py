@@ -65,8 +65,8 @@ from tasks.observed.options import ObservedOptions
 
 EPOCHS, LEARNING_RATE = 30, 3e-2  # the constitutive tasks' inner defaults
 #: What a fit's memory grows by per byte of graph and checkpoints counted: the C allocator
-#: leaves holes between the tensors a segment keeps (1.2x to 1.8x of the count, measured at
-#: 2.7e4 particles for three laws; see docs/benchmarks.md, "Scale").
+#: leaves holes between the tensors a segment keeps (1.20x and 1.85x of the count at 2.7e4
+#: particles, ``benchmarks/scale.py``; see docs/benchmarks.md, "Scale").
 ALLOCATOR_SLACK = 2.0
 #: The verdict when an observed file has changed since the run started.
 STALE = ("not judged: the observation (or validation) file has changed since the run started, "
